@@ -1,0 +1,170 @@
+"""Forward kinematics and the derived quantities networks and clean-up passes use.
+
+All functions leave their inputs alone and broadcast over leading dimensions;
+forward kinematics loops over joints, never frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from motion import rotations as rot
+from motion.errors import MotionError
+from motion.skeleton import Motion
+
+UP = np.array([0.0, 1.0, 0.0])
+FORWARD = np.array([0.0, 0.0, 1.0])
+
+
+def fk(lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations ``(..., J, 4)`` and positions ``(..., J, 3)`` from local ones.
+
+    ``lrot (..., J, 4)``, ``lpos (..., J, 3)``: a joint's rotation and its translation
+    from its parent (the root's is its world position); ``parents (J,)`` parents first.
+    """
+    lrot = np.asarray(lrot, dtype=np.float64)
+    lpos = np.asarray(lpos, dtype=np.float64)
+    shape = np.broadcast_shapes(lrot.shape[:-1], lpos.shape[:-1])
+    lrot = np.broadcast_to(lrot, shape + (4,))
+    lpos = np.broadcast_to(lpos, shape + (3,))
+    grot = np.empty(shape + (4,))
+    gpos = np.empty(shape + (3,))
+    grot[..., 0, :] = lrot[..., 0, :]
+    gpos[..., 0, :] = lpos[..., 0, :]
+    for j in range(1, len(parents)):
+        p = parents[j]
+        gpos[..., j, :] = rot.apply(grot[..., p, :], lpos[..., j, :]) + gpos[..., p, :]
+        grot[..., j, :] = rot.mul(grot[..., p, :], lrot[..., j, :])
+    return grot, gpos
+
+
+def global_positions(motion: Motion) -> np.ndarray:
+    """World joint positions ``(F, J, 3)`` of a motion."""
+    return fk(motion.lrot, motion.lpos, motion.skeleton.parents)[1]
+
+
+def global_rotations(motion: Motion) -> np.ndarray:
+    """World joint rotations ``(F, J, 4)`` of a motion."""
+    return fk(motion.lrot, motion.lpos, motion.skeleton.parents)[0]
+
+
+def local_from_global(grot: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Local rotations ``(..., J, 4)`` from global ones (inverse of the rotation part of fk)."""
+    grot = np.asarray(grot, dtype=np.float64)
+    lrot = grot.copy()
+    par = np.asarray(parents)
+    lrot[..., 1:, :] = rot.mul(rot.inv(grot[..., par[1:], :]), grot[..., 1:, :])
+    return lrot
+
+
+def facing_directions(
+    gpos: np.ndarray,
+    left_hip: int,
+    right_hip: int,
+    left_shoulder: int,
+    right_shoulder: int,
+    smooth: int = 0,
+) -> np.ndarray:
+    """Unit facing directions on the floor ``(F, 3)`` from hip and shoulder positions ``(F, J, 3)``.
+
+    The body's left-to-right axis crossed with up gives forward; ``smooth`` > 0
+    applies a Gaussian of that many frames (sigma) so turns are not jittery.
+    """
+    across = (gpos[..., left_hip, :] - gpos[..., right_hip, :]) + (
+        gpos[..., left_shoulder, :] - gpos[..., right_shoulder, :]
+    )
+    fwd = np.cross(across, UP)
+    fwd[..., 1] = 0.0
+    if smooth > 0 and fwd.ndim == 2 and len(fwd) > 1:
+        from scipy.ndimage import gaussian_filter1d
+
+        fwd = gaussian_filter1d(fwd, smooth, axis=0, mode="nearest")
+    norm = np.linalg.norm(fwd, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, fwd / np.maximum(norm, 1e-9), FORWARD)
+
+
+def facing_rotations(directions: np.ndarray) -> np.ndarray:
+    """Rotations about +Y ``(F, 4)`` that turn +Z onto each facing direction ``(F, 3)``."""
+    return rot.about_y(np.arctan2(directions[..., 0], directions[..., 2]))
+
+
+def root_local(gpos: np.ndarray, root_xz: np.ndarray, facing: np.ndarray) -> np.ndarray:
+    """Positions ``(F, J, 3)`` relative to the root on the floor, in the facing frame.
+
+    ``root_xz (F, 3)`` is the reference point (its height is ignored), ``facing (F, 4)``
+    rotations about +Y; the result faces +Z in every frame.
+    """
+    ref = np.array(root_xz, dtype=np.float64, copy=True)
+    ref[..., 1] = 0.0
+    rel = gpos - ref[..., None, :]
+    return rot.apply(rot.inv(facing)[..., None, :], rel)
+
+
+def root_velocities(
+    root_xz: np.ndarray, facing: np.ndarray, fps: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Root velocity on the floor in the facing frame ``(F, 2)`` (sideways x, forward z)
+    and turning velocity ``(F,)`` in radians per second; the last frame repeats the one before.
+    """
+    delta = np.zeros_like(root_xz, dtype=np.float64)
+    delta[:-1] = root_xz[1:] - root_xz[:-1]
+    if len(delta) > 1:
+        delta[-1] = delta[-2]
+    delta[..., 1] = 0.0
+    local = rot.apply(rot.inv(facing), delta) * fps
+    fwd = rot.apply(facing, FORWARD)
+    ang = np.unwrap(np.arctan2(fwd[..., 0], fwd[..., 2]))
+    turn = np.zeros_like(ang)
+    turn[:-1] = (ang[1:] - ang[:-1]) * fps
+    if len(turn) > 1:
+        turn[-1] = turn[-2]
+    return local[..., [0, 2]], turn
+
+
+def velocities(x: np.ndarray, fps: float) -> np.ndarray:
+    """Finite-difference velocities along axis 0 (per second), same shape; frame 0 copies frame 1."""
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) < 2:
+        return np.zeros_like(x)
+    v = np.empty_like(x)
+    v[1:] = (x[1:] - x[:-1]) * fps
+    v[0] = v[1]
+    return v
+
+
+def resample(motion: Motion, fps: float) -> Motion:
+    """The motion at a new frame rate: slerp for rotations, linear for translations.
+
+    The clip keeps its duration ``(F - 1) / fps`` between first and last frame.
+    """
+    if not np.isfinite(fps) or fps <= 0:
+        raise MotionError(f"target frame rate must be positive, got {fps}")
+    if abs(fps - motion.fps) < 1e-9 or motion.num_frames < 2:
+        return motion.replace(fps=float(fps))
+    span = (motion.num_frames - 1) / motion.fps
+    count = int(np.floor(span * fps + 1e-6)) + 1
+    t = np.arange(count) * (motion.fps / fps)
+    i0 = np.clip(np.floor(t).astype(int), 0, motion.num_frames - 1)
+    i1 = np.clip(i0 + 1, 0, motion.num_frames - 1)
+    w = (t - i0)[:, None]
+    lrot = rot.slerp(motion.lrot[i0], motion.lrot[i1], w)
+    lpos = motion.lpos[i0] * (1.0 - w[..., None]) + motion.lpos[i1] * w[..., None]
+    return motion.replace(fps=float(fps), lrot=lrot, lpos=lpos)
+
+
+def resample_count(motion: Motion, fps: float, num_frames: int) -> Motion:
+    """Resample to exactly ``num_frames`` frames at ``fps`` spanning the same duration.
+
+    Used to bring a processed clip back onto a caller's frame count.
+    """
+    if num_frames < 1:
+        raise MotionError("need at least one frame")
+    if motion.num_frames < 2 or num_frames < 2:
+        idx = np.zeros(num_frames, dtype=int)
+        return motion.replace(fps=float(fps), lrot=motion.lrot[idx], lpos=motion.lpos[idx])
+    t = np.linspace(0.0, motion.num_frames - 1, num_frames)
+    i0 = np.clip(np.floor(t).astype(int), 0, motion.num_frames - 2)
+    w = (t - i0)[:, None]
+    lrot = rot.slerp(motion.lrot[i0], motion.lrot[i0 + 1], w)
+    lpos = motion.lpos[i0] * (1.0 - w[..., None]) + motion.lpos[i0 + 1] * w[..., None]
+    return motion.replace(fps=float(fps), lrot=lrot, lpos=lpos)

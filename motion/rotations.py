@@ -1,0 +1,222 @@
+"""Quaternion helpers over ``scipy.spatial.transform.Rotation``.
+
+Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
+Products, inverses and vector rotation are plain broadcasting numpy (they run in
+the inner loop of forward kinematics); conversions to and from Euler angles,
+matrices and rotation vectors go through scipy.
+
+Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
+in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
+R = Rz @ Rx @ Ry for ``"ZXY"``), ``r6`` the continuous 6D representation (first
+two columns of the matrix).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def identity(shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Identity quaternions of shape ``shape + (4,)``."""
+    out = np.zeros(shape + (4,))
+    out[..., 3] = 1.0
+    return out
+
+
+def normalize(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(..., 4)``; zero quaternions become the identity."""
+    q = np.asarray(q, dtype=np.float64)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    out = np.where(n > 1e-12, q / np.where(n > 1e-12, n, 1.0), IDENTITY)
+    return out
+
+
+def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting ``(..., 4)``."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def inv(q: np.ndarray) -> np.ndarray:
+    """Inverse of unit quaternions ``(..., 4)`` (the conjugate)."""
+    q = np.asarray(q, dtype=np.float64)
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` (broadcasting)."""
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    qv = q[..., :3]
+    t = 2.0 * np.cross(qv, v)
+    return v + q[..., 3:4] * t + np.cross(qv, t)
+
+
+def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Shortest-arc rotation taking directions ``u`` onto ``v`` (``(..., 3)`` -> ``(..., 4)``).
+
+    Opposite directions turn by 180 degrees about an axis perpendicular to ``u``.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+    v = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    u, v = np.broadcast_arrays(u, v)
+    w = 1.0 + np.sum(u * v, axis=-1, keepdims=True)
+    axis = np.cross(u, v)
+    # for opposite vectors pick any axis perpendicular to u
+    alt = np.cross(u, np.array([1.0, 0.0, 0.0]))
+    alt2 = np.cross(u, np.array([0.0, 1.0, 0.0]))
+    alt = np.where(np.linalg.norm(alt, axis=-1, keepdims=True) < 1e-6, alt2, alt)
+    opposite = w < 1e-9
+    axis = np.where(opposite, alt, axis)
+    w = np.where(opposite, 0.0, w)
+    return normalize(np.concatenate([axis, w], axis=-1))
+
+
+def canonicalize(q: np.ndarray) -> np.ndarray:
+    """The same rotations with ``w >= 0`` (one of the two quaternions of each rotation)."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.where(q[..., 3:4] < 0, -q, q)
+
+
+def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array."""
+    q = np.array(q, dtype=np.float64, copy=True)
+    q = np.moveaxis(q, axis, 0)
+    for i in range(1, q.shape[0]):
+        flip = np.sum(q[i] * q[i - 1], axis=-1) < 0
+        q[i][flip] *= -1
+    return np.moveaxis(q, 0, axis)
+
+
+def angle(q: np.ndarray) -> np.ndarray:
+    """Rotation angle in radians ``(...,)`` of unit quaternions ``(..., 4)``."""
+    q = np.asarray(q, dtype=np.float64)
+    return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+def _scipy_order(order: str) -> str:
+    order = order.upper()
+    if len(order) != 3 or sorted(order) != ["X", "Y", "Z"]:
+        raise ValueError(f"rotation order must be a permutation of XYZ, got {order!r}")
+    return order  # upper case = intrinsic, which is what BVH channels mean
+
+
+def from_euler(e: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Quaternions ``(..., 4)`` from Euler angles ``(..., 3)`` listed in ``order``.
+
+    ``order`` is the BVH channel order, e.g. ``"ZXY"``: angles ``e[..., 0]`` about Z,
+    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry.
+    """
+    e = np.asarray(e, dtype=np.float64)
+    shape = e.shape[:-1]
+    r = Rotation.from_euler(_scipy_order(order), e.reshape(-1, 3), degrees=degrees)
+    return r.as_quat().reshape(shape + (4,))
+
+
+def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Euler angles ``(..., 3)`` in ``order`` (see :func:`from_euler`) from quaternions."""
+    q = np.asarray(q, dtype=np.float64)
+    shape = q.shape[:-1]
+    r = Rotation.from_quat(normalize(q).reshape(-1, 4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # gimbal lock is fine: any valid triple
+        e = r.as_euler(_scipy_order(order), degrees=degrees)
+    return e.reshape(shape + (3,))
+
+
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)``."""
+    q = np.asarray(q, dtype=np.float64)
+    shape = q.shape[:-1]
+    return Rotation.from_quat(normalize(q).reshape(-1, 4)).as_matrix().reshape(shape + (3, 3))
+
+
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``."""
+    m = np.asarray(m, dtype=np.float64)
+    shape = m.shape[:-2]
+    return Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat().reshape(shape + (4,))
+
+
+def to_6d(q: np.ndarray) -> np.ndarray:
+    """Continuous 6D representation ``(..., 6)``: the first two matrix columns."""
+    m = to_matrix(q)
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def from_6d(r6: np.ndarray) -> np.ndarray:
+    """Quaternions from 6D ``(..., 6)`` by Gram-Schmidt (inverse of :func:`to_6d`)."""
+    r6 = np.asarray(r6, dtype=np.float64)
+    a, b = r6[..., :3], r6[..., 3:]
+    x = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
+    b = b - np.sum(x * b, axis=-1, keepdims=True) * x
+    y = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
+    z = np.cross(x, y)
+    return from_matrix(np.stack([x, y, z], axis=-1))
+
+
+def to_rotvec(q: np.ndarray) -> np.ndarray:
+    """Axis-angle vectors ``(..., 3)`` (radians) from quaternions."""
+    q = np.asarray(q, dtype=np.float64)
+    shape = q.shape[:-1]
+    return Rotation.from_quat(normalize(q).reshape(-1, 4)).as_rotvec().reshape(shape + (3,))
+
+
+def from_rotvec(v: np.ndarray) -> np.ndarray:
+    """Quaternions from axis-angle vectors ``(..., 3)`` (radians)."""
+    v = np.asarray(v, dtype=np.float64)
+    shape = v.shape[:-1]
+    return Rotation.from_rotvec(v.reshape(-1, 3)).as_quat().reshape(shape + (4,))
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+    """Spherical interpolation from ``a`` to ``b`` (``(..., 4)``) at ``t`` (broadcasting)."""
+    a = normalize(a)
+    b = normalize(b)
+    t = np.asarray(t, dtype=np.float64)[..., None]  # t broadcasts against a.shape[:-1]
+    d = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(d < 0, -b, b)
+    d = np.abs(d)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    s = np.sin(theta)
+    small = s < 1e-6
+    s = np.where(small, 1.0, s)
+    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / s)
+    wb = np.where(small, t, np.sin(t * theta) / s)
+    return normalize(wa * a + wb * b)
+
+
+def yaw(q: np.ndarray) -> np.ndarray:
+    """Rotation about +Y only, ``(..., 4)``, that points +Z where ``q`` points +Z (projected)."""
+    fwd = apply(q, np.array([0.0, 0.0, 1.0]))
+    ang = np.arctan2(fwd[..., 0], fwd[..., 2])
+    half = 0.5 * ang
+    out = np.zeros(ang.shape + (4,))
+    out[..., 1] = np.sin(half)
+    out[..., 3] = np.cos(half)
+    return out
+
+
+def about_y(angle_rad: np.ndarray) -> np.ndarray:
+    """Rotations about +Y by ``angle_rad (...,)``."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    out = np.zeros(a.shape + (4,))
+    out[..., 1] = np.sin(0.5 * a)
+    out[..., 3] = np.cos(0.5 * a)
+    return out

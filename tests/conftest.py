@@ -1,0 +1,27 @@
+"""Shared fixtures. Real data is read from ``$MOTION_DATA_DIR`` (default ``../shared/data``
+beside the checkout); tests that need it skip with a reason when it is absent."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+DATA_DIR = Path(os.environ.get("MOTION_DATA_DIR", REPO.parent / "shared" / "data")).resolve()
+
+
+def data_path(*parts: str) -> Path:
+    """Path under the shared data folder; skips the calling test when it is missing."""
+    path = DATA_DIR.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"shared data not available: {path} (set MOTION_DATA_DIR)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    if not DATA_DIR.exists():
+        pytest.skip(f"shared data not available at {DATA_DIR} (set MOTION_DATA_DIR)")
+    return DATA_DIR

@@ -1,0 +1,1 @@
+"""Offline training (PyTorch): datasets, networks, losses, loops, evaluation."""
