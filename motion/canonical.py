@@ -49,7 +49,7 @@ def _mirror(v):
 _HIP_L = _unit([6.46, -2.19, 0.06], 6.83)
 _SHOULDER_L = _unit([4.98, 12.84, 1.0], 13.92)
 _TOES_L = _unit([0.0, -7.93, 7.96], 11.75)
-_LEG_DROP = 2.19 + 39.08 + 40.99 + 7.93  # pelvis-to-floor so that T-pose toes touch y = 0
+_LEG_DROP = -(_HIP_L[1] - 39.08 - 40.99 + _TOES_L[1])  # T-pose toes touch y = 0
 
 OFFSETS = np.array(
     [

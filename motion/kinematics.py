@@ -132,39 +132,36 @@ def velocities(x: np.ndarray, fps: float) -> np.ndarray:
     return v
 
 
-def resample(motion: Motion, fps: float) -> Motion:
-    """The motion at a new frame rate: slerp for rotations, linear for translations.
-
-    The clip keeps its duration ``(F - 1) / fps`` between first and last frame.
-    """
-    if not np.isfinite(fps) or fps <= 0:
-        raise MotionError(f"target frame rate must be positive, got {fps}")
-    if abs(fps - motion.fps) < 1e-9 or motion.num_frames < 2:
-        return motion.replace(fps=float(fps))
-    span = (motion.num_frames - 1) / motion.fps
-    count = int(np.floor(span * fps + 1e-6)) + 1
-    t = np.arange(count) * (motion.fps / fps)
-    i0 = np.clip(np.floor(t).astype(int), 0, motion.num_frames - 1)
-    i1 = np.clip(i0 + 1, 0, motion.num_frames - 1)
+def resample_at(motion: Motion, frame_positions: np.ndarray, fps: float) -> Motion:
+    """Frames at fractional source indices ``frame_positions (N,)`` (clamped to the clip),
+    slerp for rotations and linear for translations, labelled with rate ``fps``."""
+    t = np.clip(np.asarray(frame_positions, dtype=np.float64), 0.0, motion.num_frames - 1)
+    i0 = np.clip(np.floor(t).astype(int), 0, max(motion.num_frames - 2, 0))
+    i1 = np.minimum(i0 + 1, motion.num_frames - 1)
     w = (t - i0)[:, None]
     lrot = rot.slerp(motion.lrot[i0], motion.lrot[i1], w)
     lpos = motion.lpos[i0] * (1.0 - w[..., None]) + motion.lpos[i1] * w[..., None]
     return motion.replace(fps=float(fps), lrot=lrot, lpos=lpos)
 
 
-def resample_count(motion: Motion, fps: float, num_frames: int) -> Motion:
-    """Resample to exactly ``num_frames`` frames at ``fps`` spanning the same duration.
+def resample(motion: Motion, fps: float) -> Motion:
+    """The motion at a new frame rate: slerp for rotations, linear for translations.
 
-    Used to bring a processed clip back onto a caller's frame count.
+    Frame ``i`` of the result is the pose at time ``i / fps``; the result ends at the
+    last new frame within the clip. Rates within 0.01% (30 vs 1/0.0333333) count as equal.
     """
+    if not np.isfinite(fps) or fps <= 0:
+        raise MotionError(f"target frame rate must be positive, got {fps}")
+    if abs(fps - motion.fps) <= 1e-4 * fps or motion.num_frames < 2:
+        return motion.replace(fps=float(fps))
+    span = (motion.num_frames - 1) / motion.fps
+    count = int(np.floor(span * fps + 1e-3)) + 1
+    return resample_at(motion, np.arange(count) * (motion.fps / fps), fps)
+
+
+def resample_count(motion: Motion, fps: float, num_frames: int) -> Motion:
+    """Exactly ``num_frames`` frames at ``fps`` (frame ``i`` = time ``i / fps``, the last
+    source frame held past the end). Brings a processed clip back onto a caller's timing."""
     if num_frames < 1:
         raise MotionError("need at least one frame")
-    if motion.num_frames < 2 or num_frames < 2:
-        idx = np.zeros(num_frames, dtype=int)
-        return motion.replace(fps=float(fps), lrot=motion.lrot[idx], lpos=motion.lpos[idx])
-    t = np.linspace(0.0, motion.num_frames - 1, num_frames)
-    i0 = np.clip(np.floor(t).astype(int), 0, motion.num_frames - 2)
-    w = (t - i0)[:, None]
-    lrot = rot.slerp(motion.lrot[i0], motion.lrot[i0 + 1], w)
-    lpos = motion.lpos[i0] * (1.0 - w[..., None]) + motion.lpos[i0 + 1] * w[..., None]
-    return motion.replace(fps=float(fps), lrot=lrot, lpos=lpos)
+    return resample_at(motion, np.arange(num_frames) * (motion.fps / fps), fps)
