@@ -1,0 +1,75 @@
+"""Service settings: environment variables with a ``MOTION_`` prefix (``MOTION_PORT=9000``).
+
+Settings are created by the app factory (or ``python -m service``), never at import time,
+and reach handlers through :data:`service.deps.SettingsDep`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+REPO_MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+
+
+def available_cpus() -> int:
+    """CPU cores this process may use: its affinity mask, capped by a cgroup v2 CPU quota.
+
+    onnxruntime sizes its thread pools to the host's cores, not a container's share, so the
+    service sizes them itself from this number.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    try:
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()[:2]
+        if quota != "max":
+            cores = min(cores, math.ceil(int(quota) / int(period)))
+    except (OSError, ValueError):
+        pass
+    return max(1, cores)
+
+
+def _per_worker_cores(data: dict) -> int:
+    return max(1, available_cpus() // max(1, int(data.get("workers") or 1)))
+
+
+class Settings(BaseSettings):
+    """Every knob of the service. Field names are the environment variables without prefix."""
+
+    model_config = SettingsConfigDict(env_prefix="MOTION_", extra="ignore", frozen=True)
+
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    workers: int = Field(1, ge=1, description="uvicorn worker processes")
+    models_dir: Path = Field(REPO_MODELS_DIR, description="folder holding manifest.json")
+
+    max_upload_bytes: int = Field(20 * 1024 * 1024, ge=1, description="request body limit")
+    max_frames: int = Field(20_000, ge=1, description="frames per clip, in or out")
+    max_audio_seconds: float = Field(900.0, gt=0, description="decoded audio length limit")
+    request_timeout_s: float = Field(60.0, gt=0, description="limit for one inference (-> 504)")
+
+    # Declared after ``workers``: their defaults are computed from it.
+    max_concurrent_inferences: int = Field(
+        default_factory=_per_worker_cores,
+        ge=1,
+        description="inferences running at once per worker; default cores // workers",
+    )
+    intra_op_threads: int = Field(
+        default_factory=_per_worker_cores,
+        ge=1,
+        description="onnxruntime intra-op threads per session; default cores // workers",
+    )
+
+    log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+
+    @property
+    def oversubscribed(self) -> bool:
+        """True when workers x intra-op threads exceed the cores this process may use."""
+        return self.workers * self.intra_op_threads > available_cpus()

@@ -1,0 +1,25 @@
+"""Typed dependencies for route handlers. Everything lives on ``app.state`` (set by the app
+factory), so an app built with its own :class:`Settings` sees its own objects."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from service.config import Settings
+from service.inference import InferenceRunner, get_runner
+from service.registry import ModelRegistry
+
+
+def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+def get_registry(request: Request) -> ModelRegistry:
+    return request.app.state.registry
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+RegistryDep = Annotated[ModelRegistry, Depends(get_registry)]
+InferenceDep = Annotated[InferenceRunner, Depends(get_runner)]

@@ -1,0 +1,77 @@
+"""The app factory. Nothing happens at import: ``create_app()`` builds an app, its lifespan
+loads the models (in a background thread) and starts the inference pool.
+
+uvicorn calls the factory itself: ``uvicorn service.main:create_app --factory``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator, Mapping
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from service.config import Settings, available_cpus
+from service.engines import EngineFactory, import_family_engines
+from service.errors import install_error_handlers
+from service.inference import InferenceRunner
+from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
+from service.registry import ModelRegistry
+from service.routes import health, models, styles
+
+logger = logging.getLogger(__name__)
+
+DESCRIPTION = """Re-styles character animation (BVH) and generates dance from music.
+
+Errors are RFC 9457 `application/problem+json`; see `service/errors.py` for the problem types.
+Models are for research and evaluation only (see `GET /v1/models`)."""
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    settings: Settings = app.state.settings
+    if settings.oversubscribed:
+        logger.warning(
+            "%d workers x %d intra-op threads exceed the %d available cores",
+            settings.workers,
+            settings.intra_op_threads,
+            available_cpus(),
+        )
+    app.state.runner.start()
+    app.state.registry.start()
+    try:
+        yield
+    finally:
+        app.state.runner.close()
+        app.state.registry.close()
+
+
+def create_app(
+    settings: Settings | None = None, engines: Mapping[str, EngineFactory] | None = None
+) -> FastAPI:
+    """Build the service. ``settings`` default to the environment (``MOTION_*``); ``engines``
+    (family -> engine factory) default to the registered ones (``register_engine``)."""
+    settings = settings or Settings()
+    import_family_engines()
+
+    app = FastAPI(
+        title="motion-style",
+        version="0.1.0",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.registry = ModelRegistry(settings, engines)
+    app.state.runner = InferenceRunner(
+        settings.max_concurrent_inferences, settings.request_timeout_s
+    )
+
+    install_error_handlers(app)
+    # add_middleware puts each new one outside the previous: the request context is outermost
+    app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    app.add_middleware(RequestContextMiddleware)
+
+    for router in (health.router, models.router, styles.router):
+        app.include_router(router)
+    return app

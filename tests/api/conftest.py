@@ -1,0 +1,50 @@
+"""Fixtures for the API tests: the real app (``create_app``) with its lifespan running, over the
+shipped ``models/`` or a temporary models folder with a tiny ONNX graph built here."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from typing import Any
+
+import pytest
+
+from service.config import Settings
+from service.main import create_app
+
+with warnings.catch_warnings():
+    # Starlette asks for httpx2 (not installed); its TestClient still works with httpx.
+    warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
+    from fastapi.testclient import TestClient
+
+
+@pytest.fixture
+def make_client() -> Iterator[Callable[..., TestClient]]:
+    """``make_client(settings=None, engines=None, setup=None, wait=True)``: a client over a fresh
+    app whose lifespan runs until the test ends; with ``wait`` it returns once the models have
+    loaded or failed. ``setup(app)`` may add routes before the first request."""
+    with ExitStack() as stack:
+
+        def make(
+            settings: Settings | None = None,
+            engines: dict | None = None,
+            setup: Callable[[Any], None] | None = None,
+            wait: bool = True,
+            **client_kwargs: Any,
+        ) -> TestClient:
+            app = create_app(settings, engines)
+            if setup is not None:
+                setup(app)
+            client = stack.enter_context(TestClient(app, **client_kwargs))
+            if wait:
+                assert app.state.registry.wait(60), "models did not finish loading"
+            return client
+
+        yield make
+
+
+@pytest.fixture
+def client(make_client: Callable[..., TestClient]) -> TestClient:
+    """The app as shipped: settings from the environment, the repository's ``models/``."""
+    return make_client()

@@ -1,0 +1,97 @@
+"""run_inference: off the event loop, bounded by max_concurrent_inferences, 504 on timeout."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from fastapi import FastAPI, Request
+
+from service.config import Settings
+from service.deps import InferenceDep
+from service.inference import run_inference
+from service.log import request_id_var
+from tests.api.helpers import assert_problem
+
+
+class Work:
+    """Blocking work that records how many copies run at once."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.lock = threading.Lock()
+        self.running = 0
+        self.peak = 0
+        self.started = threading.Semaphore(0)
+
+    def __call__(self, seconds: float) -> str:
+        with self.lock:
+            self.running += 1
+            self.peak = max(self.peak, self.running)
+        self.started.release()
+        try:
+            self.release.wait(seconds)
+            return request_id_var.get()
+        finally:
+            with self.lock:
+                self.running -= 1
+
+
+def add_inference_routes(app: FastAPI, work: Work) -> None:
+    @app.get("/_test/work")
+    async def do_work(request: Request, seconds: float = 5.0):
+        return {"request_id": await run_inference(request, work, seconds)}
+
+    @app.get("/_test/work-dep")
+    async def do_work_dep(runner: InferenceDep, seconds: float = 5.0):
+        return {"request_id": await runner.run(work, seconds)}
+
+
+def test_inference_runs_in_a_thread_with_the_request_id(make_client):
+    work = Work()
+    work.release.set()
+    client = make_client(setup=lambda app: add_inference_routes(app, work))
+    for path in ("/_test/work", "/_test/work-dep"):
+        response = client.get(path, headers={"X-Request-Id": "inf-1"})
+        assert response.json() == {"request_id": "inf-1"}
+
+
+def test_timeout_is_504_problem(make_client):
+    work = Work()
+    client = make_client(
+        Settings(request_timeout_s=0.2), setup=lambda app: add_inference_routes(app, work)
+    )
+    started = time.perf_counter()
+    body = assert_problem(client.get("/_test/work", params={"seconds": 2}), 504, "timeout")
+    assert time.perf_counter() - started < 1.5
+    assert body["limit"] == 0.2
+    work.release.set()
+
+
+def test_health_answers_while_inference_runs_and_concurrency_is_bounded(make_client):
+    work = Work()
+    client = make_client(
+        Settings(max_concurrent_inferences=1, request_timeout_s=10),
+        setup=lambda app: add_inference_routes(app, work),
+    )
+    results: list[int] = []
+
+    def call() -> None:
+        results.append(client.get("/_test/work", params={"seconds": 10}).status_code)
+
+    threads = [threading.Thread(target=call) for _ in range(3)]
+    for thread in threads:
+        thread.start()
+    assert work.started.acquire(timeout=5)  # one is running, the others wait for the thread
+
+    started = time.perf_counter()
+    assert client.get("/healthz").status_code == 200
+    assert client.get("/readyz").status_code == 200
+    assert time.perf_counter() - started < 1.0
+    assert client.app.state.runner.in_flight == 3
+
+    work.release.set()
+    for thread in threads:
+        thread.join(timeout=10)
+    assert results == [200, 200, 200]
+    assert work.peak == 1
