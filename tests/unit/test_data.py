@@ -1,0 +1,65 @@
+"""Training datasets as canonical motions (needs the shared data; skips without it)."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from motion import canonical as C
+from motion import kinematics as K
+from tests.conftest import data_path
+
+data = pytest.importorskip("training.data")
+
+
+@pytest.fixture(scope="module")
+def bandai(tmp_path_factory):
+    data_path("bandai")
+    return data.load_bandai()
+
+
+def test_bandai_is_labelled_canonical_and_complete(bandai):
+    index = data.bandai_index()
+    assert len(bandai) == len(index) == 454
+    frames = {r["path"].split("/")[-1][:-4]: int(r["frames"]) for r in index}
+    for clip in bandai:
+        assert clip.num_frames == frames[clip.name]
+        assert clip.lrot.shape == (clip.num_frames, 22, 4) and np.isfinite(clip.lrot).all()
+    styles = Counter(c.style for c in bandai)
+    assert len(styles) == 19  # 15 + 7 minus the 3 names both datasets share
+    assert styles["normal"] == 20 + 40 and styles["elderly"] == 40
+    assert {c.content for c in bandai} >= {"walk", "run", "bow", "wave-left-hand"}
+
+
+def test_bandai_canonical_poses_stand_on_the_floor_upright(bandai):
+    for clip in bandai[::15]:
+        g = K.global_positions(clip.motion)
+        head_above_hips = g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]
+        assert np.median(head_above_hips) > 30, clip.name
+        feet = g[:, [C.INDEX["Toes_L"], C.INDEX["Toes_R"]], 1].min(axis=1)
+        assert abs(np.median(feet)) < 15, clip.name
+
+
+def test_root_travel_kept_for_clips_that_move_joint_root(bandai):
+    dash = next(c for c in bandai if c.name == "dataset-1_dash_normal_001")
+    assert np.ptp(dash.root[:, 2]) > 100
+
+
+def test_split_is_by_take_and_stratified(bandai):
+    train, val = data.split_by_take(bandai, 0.15, seed=3)
+    assert not {c.take for c in train} & {c.take for c in val}
+    assert len(train) + len(val) == len(bandai)
+    assert {c.style for c in val} == {c.style for c in bandai}
+    again = data.split_by_take(bandai, 0.15, seed=3)[1]
+    assert [c.name for c in again] == [c.name for c in val]
+
+
+def test_cmu_dance_has_genres():
+    data_path("cmu-dance-43")
+    clips = data.load_cmu_dance()
+    assert {c.genre for c in clips} == {"salsa", "indian", "modern"}
+    for c in clips:
+        g = K.global_positions(c.motion)
+        assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name
