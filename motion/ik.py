@@ -1,0 +1,563 @@
+"""Inverse kinematics: two-bone leg IK, foot-contact clean-up, fitting rotations to positions.
+
+Quaternions are (x, y, z, w) as in :mod:`motion.rotations`; positions ``(F, J, 3)``,
+Y up. Everything is vectorised over frames and loops over joints, legs or contact
+segments only. Functions return new arrays and motions and leave their inputs alone.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from motion import canonical as C
+from motion import contacts as CT
+from motion import kinematics as K
+from motion import rotations as rot
+from motion.errors import MotionError
+from motion.skeleton import Motion, Skeleton
+
+# Below this bend (sine of the knee's offset angle from the hip-ankle line, ~0.06
+# degrees) the pole takes over from the current bend direction; above it an unmoved
+# target leaves the leg exactly where it is.
+POLE_WEIGHT = 1e-3
+BLEND_SECONDS = 0.2  # default ramp in and out of a pinned contact
+REACH_EPS = 1e-3  # pinned legs stretch to at most 1 - REACH_EPS of their length
+SOFT_REACH = 0.05  # ...easing in over the last 5% of it
+
+
+def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    out = v / np.maximum(n, 1e-12)
+    if fallback is not None:
+        out = np.where(n > 1e-12, out, fallback)
+    return out
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sum(a * b, axis=-1, keepdims=True)
+
+
+def _perpendicular(v: np.ndarray, hint: np.ndarray | None = None) -> np.ndarray:
+    """A unit vector perpendicular to unit ``v (..., 3)``: ``hint``'s perpendicular part
+    where it has one, else a fixed choice."""
+    seed = np.where(np.abs(v[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    out = _unit(seed - _dot(seed, v) * v)
+    if hint is not None:
+        projected = hint - _dot(hint, v) * v
+        big = np.linalg.norm(projected, axis=-1, keepdims=True) > 1e-9 * np.maximum(
+            np.linalg.norm(hint, axis=-1, keepdims=True), 1e-300
+        )
+        out = np.where(big, _unit(projected), out)
+    return out
+
+
+def _frame_rotation(u0: np.ndarray, n0: np.ndarray, u1: np.ndarray, n1: np.ndarray) -> np.ndarray:
+    """Rotation ``(..., 4)`` taking direction ``u0`` onto ``u1`` and ``n0`` (made
+    perpendicular to ``u0``) onto ``n1`` (made perpendicular to ``u1``)."""
+
+    def frame(u, n):
+        x = _unit(u)
+        y = _unit(n - _dot(n, x) * x, _perpendicular(x))
+        return np.stack([x, y, np.cross(x, y)], axis=-1)  # columns
+
+    m = frame(u1, n1) @ np.swapaxes(frame(u0, n0), -1, -2)
+    return rot.from_matrix(m)
+
+
+class LegSolution(NamedTuple):
+    """Result of :func:`two_bone_ik`, all ``(..., 4)`` or ``(..., 3)``.
+
+    ``hip_turn`` rotates the thigh (and everything below it) about the hip;
+    ``knee_turn`` then rotates the shin about the moved knee. Both are world-frame
+    rotations: new global rotation of the thigh = ``hip_turn * old``, of the shin =
+    ``knee_turn * hip_turn * old``. ``knee`` and ``ankle`` are the new positions.
+    """
+
+    hip_turn: np.ndarray
+    knee_turn: np.ndarray
+    knee: np.ndarray
+    ankle: np.ndarray
+
+
+def two_bone_ik(
+    hip: np.ndarray,
+    knee: np.ndarray,
+    ankle: np.ndarray,
+    target: np.ndarray,
+    pole: np.ndarray | None = None,
+    eps: float = 1e-3,
+) -> LegSolution:
+    """Analytic two-bone IK moving ``ankle`` to ``target`` (all ``(..., 3)``, broadcasting).
+
+    Bone lengths are kept. The knee stays on the side it is bent to now: its bend
+    direction (perpendicular to the hip-ankle line) is carried along as that line turns
+    towards the target, so the knee never flips. ``pole (..., 3)`` says which way a
+    (nearly) straight leg bends, e.g. the knee's forward direction; without it a
+    straight leg bends towards an arbitrary side. Targets out of reach straighten the
+    leg to ``1 - eps`` of full extension (or leave it as straight as it already is);
+    targets too close bend it to ``|thigh - shin| + eps * (thigh + shin)`` from the hip.
+    """
+    hip, knee, ankle, target = np.broadcast_arrays(
+        *(np.asarray(x, dtype=np.float64) for x in (hip, knee, ankle, target))
+    )
+    thigh = knee - hip
+    shin = ankle - knee
+    thigh_len = np.linalg.norm(thigh, axis=-1, keepdims=True)
+    shin_len = np.linalg.norm(shin, axis=-1, keepdims=True)
+    full = thigh_len + shin_len
+    reach_now = ankle - hip
+    dist_now = np.linalg.norm(reach_now, axis=-1, keepdims=True)
+    line_old = _unit(reach_now, _unit(thigh, np.array([0.0, -1.0, 0.0])))
+    to_target = target - hip
+    line_new = _unit(to_target, line_old)
+
+    # clamp the hip-target distance into what the two bones can span, without
+    # bending a leg that is already straighter (or more folded) than the limits
+    longest = np.minimum(full, np.maximum((1.0 - eps) * full, dist_now))
+    folded = np.abs(thigh_len - shin_len)
+    shortest = np.maximum(folded, np.minimum(folded + eps * full, dist_now))
+    dist = np.clip(np.linalg.norm(to_target, axis=-1, keepdims=True), shortest, longest)
+
+    # bend direction: the knee's offset from the hip-ankle line, steered by the pole
+    # only when the leg is straight
+    bend_now = (thigh - _dot(thigh, line_old) * line_old) / np.maximum(thigh_len, 1e-12)
+    hint = _perpendicular(line_old, None if pole is None else np.asarray(pole, dtype=np.float64))
+    straightness = np.maximum(POLE_WEIGHT - np.linalg.norm(bend_now, axis=-1, keepdims=True), 0.0)
+    bend_old = _unit(bend_now + straightness * hint, hint)
+    bend_new = rot.apply(rot.between(line_old, line_new), bend_old)
+    bend_new = _unit(bend_new - _dot(bend_new, line_new) * line_new, _perpendicular(line_new))
+
+    cos_hip = (thigh_len**2 + dist**2 - shin_len**2) / np.maximum(2.0 * thigh_len * dist, 1e-12)
+    cos_hip = np.clip(cos_hip, -1.0, 1.0)
+    sin_hip = np.sqrt(1.0 - cos_hip**2)
+    thigh_new = thigh_len * (cos_hip * line_new + sin_hip * bend_new)
+    shin_new = dist * line_new - thigh_new
+
+    # the thigh keeps its twist relative to the bend plane, so the knee still bends
+    # about its own hinge
+    hip_turn = _frame_rotation(
+        thigh, np.cross(line_old, bend_old), thigh_new, np.cross(line_new, bend_new)
+    )
+    knee_turn = rot.between(rot.apply(hip_turn, shin), shin_new)
+    knee_new = hip + rot.apply(hip_turn, thigh)
+    ankle_new = knee_new + rot.apply(rot.mul(knee_turn, hip_turn), shin)
+    return LegSolution(hip_turn, knee_turn, knee_new, ankle_new)
+
+
+# --------------------------------------------------------------------------- feet
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of the runs of True in a 1-D bool array."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, stops = np.nonzero(edges == 1)[0].tolist(), np.nonzero(edges == -1)[0].tolist()
+    return list(zip(starts, stops, strict=True))
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _pin_offsets(
+    ankle: np.ndarray,
+    toe: np.ndarray | None,
+    ankle_contact: np.ndarray,
+    toe_contact: np.ndarray | None,
+    ankle_ground: float,
+    toe_ground: float,
+    blend: int,
+) -> np.ndarray:
+    """Displacements ``(F, 3)`` to add to the ankle so each contact holds still.
+
+    During a contact the anchor is held at one place: the segment's average on the
+    floor, and the ground level vertically. The anchor is the ankle, or the toe where
+    only the toe touches; where both touch it rolls along the foot from heel to toe
+    (the foot keeps its rotation, so one point of it can be held, not two). The
+    displacement stays continuous as the anchor moves. Around the contacts it ramps
+    in and out over ``blend`` frames.
+    """
+    frames = len(ankle)
+    roll = np.zeros(frames)  # 0: anchor at the ankle, 1: at the toe
+    contact = ankle_contact.copy()
+    if toe is not None and toe_contact is not None:
+        contact |= toe_contact
+        roll[toe_contact & ~ankle_contact] = 1.0
+        for start, stop in _runs(toe_contact & ankle_contact):
+            # from the heel, or from the toe if only the toe touched before; to the toe,
+            # or back to the heel if only the heel touches after
+            first = 1.0 if start > 0 and roll[start - 1] == 1.0 else 0.0
+            last = 0.0 if stop < frames and contact[stop] and roll[stop] == 0.0 else 1.0
+            t = np.arange(1, stop - start + 1) / (stop - start + 1)
+            roll[start:stop] = first + (last - first) * t
+    else:
+        toe = ankle
+    r = roll[:, None]
+    anchor = ankle + r * (toe - ankle)
+    ground = ankle_ground + roll * (toe_ground - ankle_ground)
+    # the displacement of the same point of the foot between frames, so a moving
+    # anchor does not jump
+    step = np.zeros((frames, 3))
+    step[1:] = anchor[1:] - (ankle[:-1] + r[1:] * (toe[:-1] - ankle[:-1]))
+
+    offsets = np.zeros((frames, 3))
+    runs = _runs(contact)
+    for start, stop in runs:
+        drift = np.cumsum(step[start:stop], axis=0)
+        drift -= drift[0]
+        held = anchor[start:stop] - drift  # where the anchor is with its slide removed
+        shift = -drift
+        shift[:, [0, 2]] += drift[:, [0, 2]].mean(axis=0)
+        shift[:, 1] += np.mean(ground[start:stop] - held[:, 1])
+        offsets[start:stop] = shift
+
+    # ramps in the gaps: towards zero for long gaps, straight across short ones
+    if blend > 0:
+        bounds = [(-1, None)] + runs + [(frames, None)]
+        for (_, prev_stop), (next_start, _) in zip(bounds[:-1], bounds[1:], strict=False):
+            gap_start = 0 if prev_stop is None else prev_stop
+            gap = next_start - gap_start
+            if gap <= 0:
+                continue
+            left = offsets[prev_stop - 1] if prev_stop is not None else np.zeros(3)
+            right = offsets[next_start] if next_start < frames else np.zeros(3)
+            t = np.arange(1, gap + 1, dtype=np.float64)[:, None]
+            if prev_stop is not None and next_start < frames and gap <= 2 * blend:
+                w = _smoothstep(t / (gap + 1))
+                offsets[gap_start:next_start] = (1.0 - w) * left + w * right
+            else:
+                fade_out = 1.0 - _smoothstep(t / (blend + 1))
+                fade_in = _smoothstep((t - gap - 1 + blend + 1) / (blend + 1))
+                offsets[gap_start:next_start] = fade_out * left + fade_in * right
+    return offsets
+
+
+def _chain(parents: np.ndarray, top: int, bottom: int) -> list[int]:
+    """Joints from ``top`` down to the parent of ``bottom``, top first."""
+    out = []
+    j = int(parents[bottom])
+    while j != top:
+        if j < 0:
+            raise MotionError(f"joint {bottom} is not below joint {top}", kind="unusable")
+        out.append(j)
+        j = int(parents[j])
+    return [top] + out[::-1]
+
+
+def _within_reach(hip, knee, ankle, target) -> np.ndarray:
+    """Targets ``(F, 3)`` the leg can reach without snapping straight.
+
+    Near full extension a small change of distance swings the knee a lot, so the leg's
+    extension beyond its current one eases towards ``1 - REACH_EPS`` of its length over
+    the last ``SOFT_REACH`` of it; the target then moves up (not sideways), so the foot
+    lifts a little rather than slides. Targets no farther than the ankle is now stay.
+    """
+    full = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
+    now = np.linalg.norm(ankle - hip, axis=-1)
+    longest = np.minimum(full, np.maximum((1.0 - REACH_EPS) * full, now))
+    rel = target - hip
+    wanted = np.linalg.norm(rel, axis=-1)
+    knee_soft = np.minimum(np.maximum(longest - SOFT_REACH * full, now), longest)
+    room = np.maximum(longest - knee_soft, 1e-12)
+    eased = knee_soft + room * -np.expm1(-np.maximum(wanted - knee_soft, 0.0) / room)
+    reach = np.where(wanted > knee_soft, np.minimum(eased, longest), wanted)
+    floor_dist2 = rel[:, 0] ** 2 + rel[:, 2] ** 2
+    lift = (wanted > reach) & (floor_dist2 < reach**2)
+    drop = np.sqrt(np.maximum(reach**2 - floor_dist2, 0.0))
+    out = target.copy()
+    out[:, 1] = np.where(lift, hip[:, 1] + np.where(rel[:, 1] < 0, -drop, drop), target[:, 1])
+    return out
+
+
+def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
+    """Forward direction of each knee ``(F, 3)``: the clip's average hinge axis in the
+    thigh's frame, or failing that (a leg never bent) the foot's direction."""
+    bend = np.cross(knee - hip, ankle - knee)
+    hinge_local = rot.apply(rot.inv(grot_hip), bend).sum(axis=0)
+    scale = (
+        np.linalg.norm(knee - hip, axis=-1).mean() * np.linalg.norm(ankle - knee, axis=-1).mean()
+    )
+    if np.linalg.norm(hinge_local) > 1e-3 * scale * len(hip):
+        hinge = rot.apply(grot_hip, hinge_local / np.linalg.norm(hinge_local))
+    elif toe is not None:
+        forward = toe - ankle
+        forward[:, 1] = 0.0
+        hinge = np.cross(forward, ankle - hip)
+    else:
+        return np.zeros_like(hip)
+    return np.cross(ankle - hip, hinge)
+
+
+def pin_feet(
+    motion: Motion,
+    contacts: np.ndarray,
+    legs: list[tuple[int, int, int, int | None]],
+    blend_frames: int | None = None,
+    toe_contacts: np.ndarray | None = None,
+) -> Motion:
+    """Foot-contact clean-up: each foot held still during its contacts, by leg IK.
+
+    ``contacts (F, n_feet)`` bool says when each foot's ankle touches the ground;
+    ``legs`` gives each foot's ``(hip, knee, ankle, toe)`` joints (``toe`` may be
+    None). ``toe_contacts (F, n_feet)`` optionally says when each toe touches: where
+    only the toe does (heel off) the toe is held, and where both do the held point
+    rolls from heel to toe. The held position is the contact's average on the floor
+    and the ground level (:func:`contacts.ground_heights`) vertically; the correction
+    ramps in and out over ``blend_frames`` (0.2 s by default). A leg that would have
+    to stretch straight lifts the foot a little instead (see ``SOFT_REACH``).
+
+    Hip and knee rotations change; the ankle keeps its global rotation, so the foot's
+    orientation does not (so with heel and toe both down, one point of a rolling foot
+    is held, not two); bone lengths are untouched and the knee keeps bending the way
+    it bends. Works on any skeleton given the joint indices.
+    """
+    contacts = np.asarray(contacts, dtype=bool)
+    frames = motion.num_frames
+    if contacts.shape != (frames, len(legs)):
+        raise MotionError(f"contacts must be ({frames}, {len(legs)}), got {contacts.shape}")
+    if toe_contacts is not None:
+        toe_contacts = np.asarray(toe_contacts, dtype=bool)
+        if toe_contacts.shape != contacts.shape:
+            raise MotionError(f"toe contacts must be {contacts.shape}, got {toe_contacts.shape}")
+    blend = int(round(BLEND_SECONDS * motion.fps)) if blend_frames is None else int(blend_frames)
+    parents = motion.skeleton.parents
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    lrot = motion.lrot.copy()
+
+    ankles = [leg[2] for leg in legs]
+    toes = [leg[3] for leg in legs if leg[3] is not None]
+    leg_len = np.mean([CT.chain_length(motion.skeleton, leg[0], leg[2]) for leg in legs])
+    levels = dict(zip(ankles + toes, CT.ground_heights(gpos, ankles + toes, leg_len), strict=True))
+
+    for i, (hip, knee, ankle, toe) in enumerate(legs):
+        toe_c = None if toe_contacts is None or toe is None else toe_contacts[:, i]
+        offsets = _pin_offsets(
+            gpos[:, ankle],
+            None if toe is None else gpos[:, toe],
+            contacts[:, i],
+            toe_c,
+            levels[ankle],
+            levels[toe] if toe is not None else levels[ankle],
+            blend,
+        )
+        moved = np.any(offsets != 0.0, axis=-1)
+        if not moved.any():
+            continue
+        f = np.nonzero(moved)[0]
+        pos = gpos[f]
+        pole = _knee_poles(
+            grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
+            None if toe is None else gpos[:, toe],
+        )[f]  # fmt: skip
+        target = _within_reach(pos[:, hip], pos[:, knee], pos[:, ankle], pos[:, ankle] + offsets[f])
+        leg_ik = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, pole, REACH_EPS)
+
+        # new global rotations along the leg; the ankle keeps its own
+        new_grot = {}
+        for j in _chain(parents, hip, knee):
+            new_grot[j] = rot.mul(leg_ik.hip_turn, grot[f, j])
+        shin_turn = rot.mul(leg_ik.knee_turn, leg_ik.hip_turn)
+        for j in _chain(parents, knee, ankle):
+            new_grot[j] = rot.mul(shin_turn, grot[f, j])
+        new_grot[ankle] = grot[f, ankle]
+        for j, g in new_grot.items():
+            p = int(parents[j])
+            parent_rot = new_grot.get(p, grot[f, p])
+            local = rot.mul(rot.inv(parent_rot), g)
+            # keep the old quaternion's sign so the clip stays continuous
+            lrot[f, j] = np.where(_dot(local, lrot[f, j]) < 0, -local, local)
+    return motion.replace(lrot=lrot)
+
+
+CANONICAL_LEGS = [
+    tuple(C.INDEX[f"{part}_{side}"] for part in ("UpperLeg", "LowerLeg", "Foot", "Toes"))
+    for side in ("L", "R")
+]
+
+
+def pin_canonical_feet(motion: Motion, contacts: np.ndarray | None = None, **options) -> Motion:
+    """:func:`pin_feet` for a canonical motion; ``contacts (F, 4)`` as
+    :func:`contacts.canonical_foot_contacts` gives them (Foot_L, Toes_L, Foot_R, Toes_R),
+    detected when not given."""
+    if motion.skeleton.names != C.JOINTS:
+        raise MotionError("expected a motion on the canonical skeleton", kind="unusable")
+    contacts = CT.canonical_foot_contacts(motion) if contacts is None else np.asarray(contacts)
+    if contacts.shape != (motion.num_frames, 4):
+        raise MotionError(f"contacts must be ({motion.num_frames}, 4), got {contacts.shape}")
+    return pin_feet(
+        motion, contacts[:, [0, 2]], CANONICAL_LEGS, toe_contacts=contacts[:, [1, 3]], **options
+    )
+
+
+# --------------------------------------------------------------------------- positions
+
+
+def _translated_joints(skeleton: Skeleton) -> list[int]:
+    """Joints whose translation follows the target: the root, and children of the root
+    with position channels (the canonical Hips under its floor root)."""
+    return [0] + [c for c in skeleton.children(0) if skeleton.has_position(c)]
+
+
+def _bones(skeleton: Skeleton, translated: list[int]) -> list[list[tuple[int, list[int]]]]:
+    """For each joint, the bones its rotation aims: ``(descendant, zero-length joints
+    between)``. A child with a zero offset passes its own children up, so a CMU pelvis
+    (three zero-offset children) still sees its legs and spine."""
+    lengths = np.linalg.norm(skeleton.offsets, axis=-1)
+    tiny = 1e-9 * max(float(lengths.max()), 1e-9)
+    out: list[list[tuple[int, list[int]]]] = []
+    for j in range(skeleton.num_joints):
+        bones: list[tuple[int, list[int]]] = []
+        stack = [(c, []) for c in skeleton.children(j) if c not in translated]
+        while stack:
+            c, between = stack.pop(0)
+            if lengths[c] > tiny:
+                bones.append((c, between))
+            else:
+                stack.extend((g, between + [c]) for g in skeleton.children(c))
+        out.append(bones)
+    return out
+
+
+def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations ``(F, 4)`` minimising ``sum_k |R a_k - b_k|^2`` for ``a, b (F, K, 3)``
+    (about the origin), and whether each was well determined ``(F,)`` (not all
+    ``a_k`` on one line)."""
+    h = np.einsum("fki,fkj->fij", a, b)
+    u, s, vt = np.linalg.svd(h)
+    v = np.swapaxes(vt, -1, -2)
+    flip = np.sign(np.linalg.det(v @ np.swapaxes(u, -1, -2)))
+    flip = np.where(flip == 0, 1.0, flip)
+    d = np.ones(s.shape)
+    d[:, 2] = flip
+    m = (v * d[:, None, :]) @ np.swapaxes(u, -1, -2)
+    ok = s[:, 1] > 1e-6 * np.maximum(s[:, 0], 1e-300)
+    return rot.from_matrix(m), ok
+
+
+def _fit_pass(
+    targets: np.ndarray, skeleton: Skeleton, lrot_init: np.ndarray, translated: list[int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One top-down pass: each joint's rotation aims its bones at the target positions
+    from where its parent put it. Returns ``lrot, grot (F, J, 4)``, ``gpos (F, J, 3)``."""
+    frames, joints = targets.shape[:2]
+    parents = skeleton.parents
+    lrot = lrot_init.copy()
+    grot = np.empty((frames, joints, 4))
+    gpos = np.empty((frames, joints, 3))
+    for j, bones in enumerate(_bones(skeleton, translated)):
+        p = int(parents[j])
+        parent_rot = rot.identity((frames,)) if p < 0 else grot[:, p]
+        if j in translated:
+            gpos[:, j] = targets[:, j]
+        else:
+            gpos[:, j] = gpos[:, p] + rot.apply(parent_rot, skeleton.offsets[j])
+        g = rot.mul(parent_rot, lrot_init[:, j])
+        if bones:
+            rest = []
+            for d, between in bones:
+                chain = rot.identity((frames,))
+                for k in between:
+                    chain = rot.mul(chain, lrot_init[:, k])
+                rest.append(rot.apply(rot.mul(g, chain), skeleton.offsets[d]))
+            now = np.stack(rest, axis=1)
+            wanted = targets[:, [d for d, _ in bones]] - gpos[:, j, None]
+            # the shortest swing of the summed bone: exact for one bone, the fallback
+            # for bones all on one line; several bones fix the twist too
+            swing = rot.between(now.sum(axis=1), wanted.sum(axis=1))
+            if len(bones) > 1:
+                turn, ok = _kabsch(now, wanted)
+                swing = np.where(ok[:, None], turn, swing)
+            g = rot.mul(swing, g)
+        grot[:, j] = g
+        lrot[:, j] = rot.mul(rot.inv(parent_rot), g)
+    return lrot, grot, gpos
+
+
+def _subtrees(skeleton: Skeleton, translated: list[int]) -> list[list[int]]:
+    """Descendants of each joint that move rigidly with it (translated joints excluded)."""
+    below: list[list[int]] = [[] for _ in range(skeleton.num_joints)]
+    for j in range(skeleton.num_joints - 1, 0, -1):
+        if j in translated:
+            continue
+        p = int(skeleton.parents[j])
+        below[p] = [j] + below[j] + below[p]
+    return below
+
+
+def _refine(
+    gpos: np.ndarray, targets: np.ndarray, skeleton: Skeleton, translated: list[int]
+) -> np.ndarray:
+    """One top-down sweep of block coordinate descent on positions: each joint turns
+    its subtree rigidly about itself to best match the targets (bone lengths kept)."""
+    gpos = gpos.copy()
+    for j, sub in enumerate(_subtrees(skeleton, translated)):
+        if not sub:
+            continue
+        now = gpos[:, sub] - gpos[:, j, None]
+        turn, _ = _kabsch(now, targets[:, sub] - gpos[:, j, None])
+        gpos[:, sub] = gpos[:, j, None] + rot.apply(turn[:, None], now)
+    return gpos
+
+
+def fit_positions(
+    target_gpos: np.ndarray,
+    skeleton: Skeleton,
+    reference: Motion | None = None,
+    iterations: int = 2,
+    fps: float | None = None,
+) -> Motion:
+    """A motion on ``skeleton`` whose joints follow ``target_gpos (F, J, 3)``.
+
+    Bone lengths are the skeleton's, exactly; positions are matched as well as rigid
+    bones allow. The root (and a root child with position channels, e.g. the canonical
+    Hips) takes its translation from the target. Going down the hierarchy, each joint
+    turns by the shortest swing that aims its bone at the target, or, with several
+    bones (pelvis, chest), by the rotation that best aligns them all (Kabsch). Twist
+    comes from ``reference``'s local rotations when given (it must have the same
+    skeleton and frame count), else it is zero relative to the rest pose; joints without
+    bones (leaves) keep the reference's rotation or the identity. ``iterations`` sweeps
+    of rigid subtree alignment refine the positions of noisy targets before the final
+    pass. ``fps`` defaults to the reference's, else the canonical 30.
+    """
+    target_gpos = np.asarray(target_gpos, dtype=np.float64)
+    joints = skeleton.num_joints
+    if target_gpos.ndim != 3 or target_gpos.shape[1:] != (joints, 3):
+        raise MotionError(
+            f"target positions must be (frames, {joints}, 3), got {target_gpos.shape}"
+        )
+    if not np.all(np.isfinite(target_gpos)):
+        raise MotionError("target positions contain NaN or infinity")
+    frames = len(target_gpos)
+    if frames == 0:
+        raise MotionError("target positions have no frames")
+    if reference is not None:
+        if reference.skeleton.num_joints != joints or reference.num_frames != frames:
+            raise MotionError("reference motion must have the same joints and frame count")
+        lrot_init = rot.normalize(reference.lrot)
+        fps = reference.fps if fps is None else fps
+    else:
+        lrot_init = rot.identity((frames, joints))
+    fps = C.FPS if fps is None else float(fps)
+    translated = _translated_joints(skeleton)
+
+    lrot, grot, gpos = _fit_pass(target_gpos, skeleton, lrot_init, translated)
+    if iterations > 0:
+        for _ in range(iterations):
+            gpos = _refine(gpos, target_gpos, skeleton, translated)
+        lrot, grot, gpos = _fit_pass(gpos, skeleton, lrot_init, translated)
+
+    lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
+    for j in translated:
+        p = int(skeleton.parents[j])
+        lpos[:, j] = (
+            target_gpos[:, j]
+            if p < 0
+            else rot.apply(rot.inv(grot[:, p]), target_gpos[:, j] - gpos[:, p])
+        )
+    if reference is not None:
+        lrot = np.where(_dot(lrot, reference.lrot) < 0, -lrot, lrot)
+    else:
+        lrot = rot.make_continuous(lrot)
+    return Motion(skeleton, fps, lrot, lpos)
