@@ -260,3 +260,111 @@ def split_by_take(
         for c in items:
             (val if c.take in chosen else train).append(c)
     return train, val
+
+
+# --------------------------------------------------------------------------- Dance with Melody
+
+DWM_FPS = 25.0
+DWM_GENRES = {"C": "cha-cha", "R": "rumba", "T": "tango", "W": "waltz"}
+
+
+def dwm_canonical_positions(points: np.ndarray) -> np.ndarray:
+    """Canonical joint positions ``(F, 22, 3)`` from Dance-with-Melody markers ``(F, 23, 3)``.
+
+    The 23 points are marker-like (data README: 0/1 head, 2 pelvis top, 3-6 right arm
+    to hand, 7-11 right hip, knee, ankle, heel, toe, 12-15 left arm, 16-20 left leg,
+    21/22 hand direction). Joints with no marker are placed at the fractions the
+    canonical skeleton has (chest at 0.35 from spine to neck, clavicle start halfway
+    from the neck base to the shoulder).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    out = np.zeros(p.shape[:-2] + (len(C.JOINTS), 3))
+    hip_mid = 0.5 * (p[..., 7, :] + p[..., 16, :])
+    neck_base = 0.5 * (p[..., 3, :] + p[..., 12, :])
+    head = 0.5 * (p[..., 0, :] + p[..., 1, :])
+    put = {
+        "Hips": hip_mid + 0.12 * (p[..., 2, :] - hip_mid),
+        "Spine": p[..., 2, :],
+        "Chest": p[..., 2, :] + 0.35 * (neck_base - p[..., 2, :]),
+        "Neck": neck_base + 0.2 * (head - neck_base),
+        "Head": head,
+        "UpperArm_L": p[..., 12, :], "LowerArm_L": p[..., 13, :], "Hand_L": p[..., 15, :],
+        "UpperArm_R": p[..., 3, :], "LowerArm_R": p[..., 4, :], "Hand_R": p[..., 6, :],
+        "UpperLeg_L": p[..., 16, :], "LowerLeg_L": p[..., 17, :], "Foot_L": p[..., 18, :],
+        "Toes_L": p[..., 20, :],
+        "UpperLeg_R": p[..., 7, :], "LowerLeg_R": p[..., 8, :], "Foot_R": p[..., 9, :],
+        "Toes_R": p[..., 11, :],
+    }  # fmt: skip
+    put["Shoulder_L"] = neck_base + 0.5 * (p[..., 12, :] - neck_base)
+    put["Shoulder_R"] = neck_base + 0.5 * (p[..., 3, :] - neck_base)
+    for name, value in put.items():
+        out[..., C.INDEX[name], :] = value
+    out[..., 0, :] = hip_mid * np.array([1.0, 0.0, 1.0])  # root on the floor below the hips
+    return out
+
+
+def read_dwm_folder(folder: Path) -> tuple[np.ndarray, dict]:
+    """Marker positions ``(F, 23, 3)`` (``skeletons + center``, the global path) and config."""
+    with open(folder / "skeletons.json") as f:
+        doc = json.load(f)
+    with open(folder / "config.json") as f:
+        config = json.load(f)
+    points = np.asarray(doc["skeletons"], dtype=np.float64) + np.asarray(doc["center"])[:, None]
+    return points, config
+
+
+def load_dance_with_melody(root: Path | None = None) -> list[Clip]:
+    """Dance-with-Melody dances on the canonical skeleton at 30 fps, labelled by genre.
+
+    Marker positions are fitted with ``motion.ik.fit_positions`` (bone lengths exact,
+    pelvis and chest from several markers), the floor is put at the feet's ground
+    level, and the clip remembers where it sits in its song: ``extra["audio"]`` (path
+    relative to the data folder) and ``extra["audio_offset_s"]`` (``start_position /
+    25`` as ``config.json`` gives it; see issue 5 for whether that alignment holds).
+    """
+    from motion import contacts, ik, kinematics
+
+    root = (root or data_dir()) / "dance-with-melody"
+    folders = sorted(p for p in root.glob("DANCE_*") if (p / "skeletons.json").exists())
+
+    def build() -> list[Clip]:
+        clips = []
+        for folder in folders:
+            points, config = read_dwm_folder(folder)
+            target = dwm_canonical_positions(points)
+            motion = ik.fit_positions(target, C.SKELETON, fps=DWM_FPS)
+            gpos = kinematics.global_positions(motion)
+            toes = [C.INDEX["Toes_L"], C.INDEX["Toes_R"]]
+            floor = float(np.min(contacts.ground_heights(gpos, toes)))  # toes on y = 0
+            lpos = motion.lpos.copy()
+            lpos[:, 1, 1] -= floor
+            motion = kinematics.resample(motion.replace(lpos=lpos), C.FPS)
+            genre = DWM_GENRES[folder.name.split("_")[1]]
+            clips.append(
+                clip_from_motion(
+                    motion,
+                    name=folder.name,
+                    dataset="dance-with-melody",
+                    take=folder.name,
+                    genre=genre,
+                    extra={
+                        "audio": f"dance-with-melody/{folder.name}/audio.mp3",
+                        "audio_offset_s": config["start_position"] / DWM_FPS,
+                        "config": config,
+                        "source_frames": int(points.shape[0]),
+                    },
+                )
+            )
+        return clips
+
+    return _cached("dance_with_melody", [f / "skeletons.json" for f in folders], build)
+
+
+def clip_audio(clip: Clip, root: Path | None = None) -> tuple[np.ndarray, int]:
+    """The part of a dance clip's song that its motion covers, as mono samples and rate."""
+    from motion import audio
+
+    samples, sr = audio.decode((root or data_dir()) / clip.extra["audio"])
+    start = int(round(clip.extra["audio_offset_s"] * sr))
+    stop = start + int(round(clip.num_frames / C.FPS * sr))
+    return samples[start:stop], sr

@@ -63,3 +63,24 @@ def test_cmu_dance_has_genres():
     for c in clips:
         g = K.global_positions(c.motion)
         assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name
+
+
+def test_dance_with_melody_fits_the_canonical_skeleton():
+    data_path("dance-with-melody")
+    clips = data.load_dance_with_melody()
+    assert len(clips) == 23
+    assert {c.genre for c in clips} == {"cha-cha", "rumba", "tango", "waltz"}
+    for c in clips[::5]:
+        # 25 fps source resampled to 30 fps over the same duration
+        assert abs(c.num_frames / 30.0 - (c.extra["source_frames"] - 1) / 25.0) < 2 / 30
+        g = K.global_positions(c.motion)
+        assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name
+        lengths = np.linalg.norm(g[:, 8] - g[:, 7], axis=-1)  # upper arm: rigid after the fit
+        assert np.ptp(lengths) < 1e-6
+
+
+def test_dance_audio_covers_the_motion():
+    data_path("dance-with-melody")
+    clip = next(c for c in data.load_dance_with_melody() if c.name == "DANCE_W_14")
+    samples, sr = data.clip_audio(clip)
+    assert abs(len(samples) / sr - clip.num_frames / 30.0) < 0.05
