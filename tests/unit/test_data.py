@@ -76,7 +76,7 @@ def test_dance_with_melody_fits_the_canonical_skeleton():
         g = K.global_positions(c.motion)
         assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name
         lengths = np.linalg.norm(g[:, 8] - g[:, 7], axis=-1)  # upper arm: rigid after the fit
-        assert np.ptp(lengths) < 1e-6
+        assert np.ptp(lengths) < 1e-4  # rotations are stored as float32
 
 
 def test_dance_audio_covers_the_motion():
