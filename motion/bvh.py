@@ -16,6 +16,7 @@ import io
 import math
 import os
 import re
+import warnings
 
 import numpy as np
 
@@ -242,9 +243,14 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
             f"line {first + frames}: file ends after {frames} frames, header says {declared}",
             line=first + frames,
         )
-    try:
-        values = np.array(" ".join(rows[:frames]).split(), dtype=np.float64)
-    except ValueError:
+    values = None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
+        try:
+            values = np.fromstring(" ".join(rows[:frames]), dtype=np.float64, sep=" ")
+        except (DeprecationWarning, ValueError):
+            values = None
+    if values is None or values.size != frames * num_channels:
         for i, r in enumerate(rows[:frames]):
             try:
                 [float(t) for t in r.split()]
@@ -252,7 +258,9 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
                 raise MotionError(
                     f"line {first + i + 1}: a value is not a number", line=first + i + 1
                 ) from None
-        raise
+        raise MotionError(
+            f"line {first + 1}: the frames could not be read as numbers", line=first + 1
+        )
     values = values.reshape(frames, num_channels)
     if not np.isfinite(values).all():
         i = int(np.nonzero(~np.isfinite(values).all(axis=1))[0][0])
@@ -266,19 +274,22 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
 def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
     frames = values.shape[0]
     lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
-    lrot = np.empty((frames, skeleton.num_joints, 4))
+    euler = np.zeros((frames, skeleton.num_joints, 3))
     col = 0
     for j, chans in enumerate(skeleton.channels):
-        block = values[:, col : col + len(chans)]
-        col += len(chans)
-        euler = np.zeros((frames, 3))
         order = skeleton.rotation_order(j)
-        for k, c in enumerate(chans):
+        for c in chans:
             if c in POSITION_CHANNELS:
-                lpos[:, j, "XYZ".index(c[0])] = block[:, k]
+                lpos[:, j, "XYZ".index(c[0])] = values[:, col]
             else:
-                euler[:, order.index(c[0])] = block[:, k]
-        lrot[:, j] = rotations.from_euler(euler, order)
+                euler[:, j, order.index(c[0])] = values[:, col]
+            col += 1
+    lrot = np.empty((frames, skeleton.num_joints, 4))
+    orders: dict[str, list[int]] = {}
+    for j in range(skeleton.num_joints):
+        orders.setdefault(skeleton.rotation_order(j), []).append(j)
+    for order, joints in orders.items():  # one scipy call per Euler order, not per joint
+        lrot[:, joints] = rotations.from_euler(euler[:, joints], order)
     return Motion(skeleton, fps, lrot, lpos)
 
 

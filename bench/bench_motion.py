@@ -1,0 +1,72 @@
+"""Motion-core speed: BVH parse and write frames/s, and retargeting to canonical and back.
+
+    python -m bench.bench_motion [--data ../shared/data] [--repeat 3]
+
+Reports frames/s for every layout in the shared data, measured in one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from motion import bvh, retarget
+from motion import kinematics as K
+
+FILES = [
+    "bandai/dataset-1/dataset-1_dance-short_normal_001.bvh",
+    "cmu-31/05_20.bvh",
+    "cmu-dance-43/60_09_scaled.bvh",
+    "cmu-dance-3dsmax/94_01_indian_dance.bvh",
+]
+
+
+def best_of(repeat: int, fn) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", default=os.environ.get("MOTION_DATA_DIR", "../shared/data"))
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    print(
+        f"{'file':45s} {'frames':>6s} {'joints':>6s} {'parse f/s':>10s} {'write f/s':>10s} "
+        f"{'canon+back f/s':>14s} {'round-trip err':>14s}"
+    )
+    for rel in FILES:
+        path = Path(args.data) / rel
+        raw = path.read_bytes()
+        m = bvh.loads(raw)
+        t_parse = best_of(args.repeat, lambda raw=raw: bvh.loads(raw))
+        t_write = best_of(args.repeat, lambda m=m: bvh.dumps(m))
+        rig = retarget.make_rig(m.skeleton, m)
+
+        def round_trip(m=m, rig=rig):
+            return retarget.from_canonical(retarget.to_canonical(m, rig), rig, like=m)
+
+        t_rt = best_of(args.repeat, round_trip)
+        back = round_trip()
+        idx = list(rig.mapping.values())
+        err = np.linalg.norm(
+            K.global_positions(back)[:, idx] - K.global_positions(m)[:, idx], axis=-1
+        )
+        height = rig.leg_length * 2.2  # body height ~ 2.2 leg lengths, also for flat rest poses
+        n = m.num_frames
+        print(
+            f"{rel:45s} {n:6d} {m.skeleton.num_joints:6d} {n / t_parse:10.0f} {n / t_write:10.0f} "
+            f"{n / t_rt:14.0f} {100 * err.mean() / height:13.3f}%"
+        )
+
+
+if __name__ == "__main__":
+    main()
