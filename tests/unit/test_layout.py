@@ -1,0 +1,46 @@
+"""The one dependency rule of DESIGN.md: motion imports no torch and none of the other
+packages; service imports neither torch nor training."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import REPO
+
+FORBIDDEN = {
+    "motion": {"torch", "training", "service", "model_export", "onnxruntime", "librosa"},
+    "service": {"torch", "training", "model_export", "librosa"},
+}
+
+
+def imported_roots(path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    roots = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            roots |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            roots.add(node.module.split(".")[0])
+    return roots
+
+
+@pytest.mark.parametrize("package", sorted(FORBIDDEN))
+def test_package_respects_the_dependency_rule(package):
+    for path in sorted((REPO / package).rglob("*.py")):
+        bad = imported_roots(path) & FORBIDDEN[package]
+        assert not bad, f"{path.relative_to(REPO)} imports {sorted(bad)}"
+
+
+def test_importing_motion_loads_no_torch():
+    code = (
+        "import sys, importlib, pkgutil, motion\n"
+        "for m in pkgutil.iter_modules(motion.__path__):\n"
+        "    importlib.import_module('motion.' + m.name)\n"
+        "assert 'torch' not in sys.modules, 'torch imported'\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
