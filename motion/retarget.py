@@ -174,49 +174,40 @@ def _auto_mapping(skeleton: Skeleton) -> dict[str, int]:
                     best = (depth, j)
         return None if best is None else best[1]
 
-    for side in ("L", "R"):
-        # legs: the knee anchors the chain (its parent is the thigh)
-        knees = [j for j in candidates("LowerLeg", side)]
-        thighs = candidates("UpperLeg", side)
-        knee = next(
-            (k for k in knees if any(_is_ancestor(parents, t, k) and t != k for t in thighs)), None
+    def chain_anchor(middle: str, top: str, side: str) -> tuple[int | None, int | None]:
+        """The knee (elbow) and its thigh (upper arm): the middle joint anchors a limb."""
+        middles, tops = candidates(middle, side), candidates(top, side)
+        mid = next(
+            (k for k in middles if any(t != k and _is_ancestor(parents, t, k) for t in tops)),
+            middles[0] if middles else None,
         )
-        if knee is None and knees:
-            knee = knees[0]
+        if mid is None:
+            return None, None
+        upper = _nearest_ancestor_in(parents, mid, tops)
+        return (upper if upper is not None else _non_helper_parent(parents, info, mid)), mid
+
+    for side in ("L", "R"):
+        thigh, knee = chain_anchor("LowerLeg", "UpperLeg", side)
         if knee is not None:
-            thigh = _nearest_ancestor_in(parents, knee, thighs) or _non_helper_parent(
-                parents, info, knee
-            )
-            foot = descendants_first(knee, candidates("Foot", side))
             out[f"LowerLeg_{side}"] = knee
             if thigh is not None:
                 out[f"UpperLeg_{side}"] = thigh
+            foot = descendants_first(knee, candidates("Foot", side))
             if foot is not None:
                 out[f"Foot_{side}"] = foot
                 toe = descendants_first(foot, candidates("Toes", side))
                 if toe is not None:
                     out[f"Toes_{side}"] = toe
-        # arms: the elbow anchors the chain
-        elbows = candidates("LowerArm", side)
-        uppers = candidates("UpperArm", side)
-        elbow = next(
-            (e for e in elbows if any(_is_ancestor(parents, u, e) and u != e for u in uppers)), None
-        )
-        if elbow is None and elbows:
-            elbow = elbows[0]
+        upper, elbow = chain_anchor("LowerArm", "UpperArm", side)
         if elbow is not None:
-            upper = _nearest_ancestor_in(parents, elbow, uppers) or _non_helper_parent(
-                parents, info, elbow
-            )
-            hand = descendants_first(elbow, candidates("Hand", side))
             out[f"LowerArm_{side}"] = elbow
             if upper is not None:
                 out[f"UpperArm_{side}"] = upper
-                clav = _nearest_ancestor_in(
-                    parents, upper, [c for c in candidates("Shoulder", side) if c != upper]
-                )
+                clavicles = [c for c in candidates("Shoulder", side) if c != upper]
+                clav = _nearest_ancestor_in(parents, upper, clavicles)
                 if clav is not None:
                     out[f"Shoulder_{side}"] = clav
+            hand = descendants_first(elbow, candidates("Hand", side))
             if hand is not None:
                 out[f"Hand_{side}"] = hand
     # trunk from the hierarchy: hips = common ancestor of the thighs, chest = of the arms
