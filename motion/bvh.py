@@ -27,6 +27,9 @@ from motion.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skelet
 _VALID_CHANNELS = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 _FRAMES_RE = re.compile(r"^frames\s*:?\s*(\S+)$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(r"^frame\s+time\s*:?\s*(\S+)$", re.IGNORECASE)
+_MAX_ABS_VALUE = 1e9  # offsets and channel values beyond this are damage, not motion
+_MIN_FRAME_TIME = 1e-4  # 10,000 fps: no capture system records faster
+_MAX_DEPTH = 256  # real rigs nest < 100 deep; deeper would overflow recursive writers
 
 
 def load(path: str | os.PathLike) -> Motion:
@@ -83,6 +86,8 @@ def _parse_floats(tokens: list[str], n: int, line: int, what: str) -> list[float
         ) from None
     if not all(math.isfinite(v) for v in vals):
         raise MotionError(f"line {line}: {what} is not finite", line=line)
+    if any(abs(v) > _MAX_ABS_VALUE for v in vals):
+        raise MotionError(f"line {line}: {what} has an absurdly large value", line=line)
     return vals
 
 
@@ -105,6 +110,7 @@ def _parse_hierarchy(lines: list[str]) -> tuple[Skeleton, int]:
     if head[0].upper() != "ROOT" or len(head) < 2:
         raise MotionError(f"line {n}: expected 'ROOT <name>', found {text[:40]!r}", line=n)
     names.append(head[1].strip())
+    seen = {names[0]}  # a set beside the list: 10,000 joints must not cost 10,000^2 compares
     parents.append(-1)
     offsets.append([0.0, 0.0, 0.0])
     channels.append(())
@@ -118,6 +124,8 @@ def _parse_hierarchy(lines: list[str]) -> tuple[Skeleton, int]:
                 raise MotionError(f"line {n}: expected '{{', found {text[:40]!r}", line=n)
             stack.append(pending[1] if pending[0] == "joint" else None)
             pending = None
+            if len(stack) > _MAX_DEPTH:
+                raise MotionError(f"line {n}: joints nested more than {_MAX_DEPTH} deep", line=n)
             continue
         if not stack:
             if key == "MOTION":
@@ -145,10 +153,12 @@ def _parse_hierarchy(lines: list[str]) -> tuple[Skeleton, int]:
             except (IndexError, ValueError):
                 raise MotionError(f"line {n}: CHANNELS needs a count", line=n) from None
             names_ = tokens[2:]
-            if count != len(names_) or not 0 <= count <= 6:
+            if count != len(names_):
                 raise MotionError(
                     f"line {n}: CHANNELS says {tokens[1]} but lists {len(names_)} channels", line=n
                 )
+            if not 0 <= count <= 6:
+                raise MotionError(f"line {n}: CHANNELS lists {count}; at most 6", line=n)
             chans = []
             for c in names_:
                 if c.lower() not in _VALID_CHANNELS:
@@ -163,8 +173,9 @@ def _parse_hierarchy(lines: list[str]) -> tuple[Skeleton, int]:
             name = text.split(None, 1)[1].strip() if len(tokens) > 1 else ""
             if not name:
                 raise MotionError(f"line {n}: JOINT needs a name", line=n)
-            if name in names:
+            if name in seen:
                 raise MotionError(f"line {n}: joint name {name!r} is used twice", line=n)
+            seen.add(name)
             names.append(name)
             parents.append(top)
             offsets.append([0.0, 0.0, 0.0])
@@ -220,7 +231,7 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
         frame_time = float(m.group(1))
     except ValueError:
         raise MotionError(f"line {n}: frame time {m.group(1)!r} is not a number", line=n) from None
-    if not math.isfinite(frame_time) or frame_time <= 0 or frame_time > 10:
+    if not math.isfinite(frame_time) or not _MIN_FRAME_TIME <= frame_time <= 10:
         raise MotionError(f"line {n}: frame time {frame_time} s is not usable", line=n)
     num_channels = sum(len(c) for c in skeleton.channels)
     first = src.i
@@ -265,8 +276,8 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
     if not np.isfinite(values).all():
         i = int(np.nonzero(~np.isfinite(values).all(axis=1))[0][0])
         raise MotionError(f"line {first + i + 1}: a value is not finite", line=first + i + 1)
-    if np.abs(values).max(initial=0.0) > 1e9:
-        i = int(np.nonzero((np.abs(values) > 1e9).any(axis=1))[0][0])
+    if np.abs(values).max(initial=0.0) > _MAX_ABS_VALUE:
+        i = int(np.nonzero((np.abs(values) > _MAX_ABS_VALUE).any(axis=1))[0][0])
         raise MotionError(f"line {first + i + 1}: a value is absurdly large", line=first + i + 1)
     return 1.0 / frame_time, values
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import re
 import zipfile
@@ -488,7 +489,14 @@ def _read_zip(raw: bytes, max_frames: int, max_bytes: int) -> tuple[list[Any], d
     try:
         zf = zipfile.ZipFile(io.BytesIO(raw))
         infos = zf.infolist()
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError):
+    except (
+        zipfile.BadZipFile,
+        zipfile.LargeZipFile,
+        OSError,
+        ValueError,
+        EOFError,
+        NotImplementedError,  # e.g. an entry that needs a newer zip version than Python reads
+    ):
         raise MotionError("keypoint input is not a readable zip archive") from None
     if len(infos) > max_frames + 1000:
         raise MotionError(
@@ -773,11 +781,11 @@ def _resolve_layout(name: Any) -> _Layout | None:
     if name is None:
         return None
     if not isinstance(name, str):
-        raise MotionError(f"layout must be a name, got {name!r}")
+        raise MotionError(f"layout must be a name, got {name!r:.80}")
     key = _ALIASES.get(re.sub(r"[^a-z0-9]", "", name.lower()))
     if key is None:
         raise MotionError(
-            f"unknown keypoint layout {name!r}; known: {', '.join(LAYOUTS)}", kind="unsupported"
+            f"unknown keypoint layout {name!r:.80}; known: {', '.join(LAYOUTS)}", kind="unsupported"
         )
     return LAYOUTS[key]
 
@@ -805,12 +813,21 @@ def _detect_layout(frames: list[list[np.ndarray]], lay: _Layout | None) -> _Layo
     return _BY_COUNT[count]
 
 
+def _as_float(value: Any) -> float:
+    """A JSON number as a float; an integer too large for one becomes inf (not an error)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
 def _check_fps(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise MotionError(f"fps must be a number, got {value!r}")
-    if not (np.isfinite(value) and 0 < value <= 1000):
-        raise MotionError(f"fps must lie in (0, 1000], got {value}")
-    return float(value)
+        raise MotionError(f"fps must be a number, got {value!r:.80}")
+    fps = _as_float(value)
+    if not (math.isfinite(fps) and 0 < fps <= 1000):
+        raise MotionError(f"fps must lie in (0, 1000], got {fps:g}")
+    return fps
 
 
 def _check_image_size(value: Any) -> tuple[float, float]:
@@ -820,10 +837,10 @@ def _check_image_size(value: Any) -> tuple[float, float]:
         isinstance(value, (list, tuple))
         and len(value) == 2
         and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-        and all(np.isfinite(v) and 0 < v < _MAX_COORD for v in value)
+        and all(math.isfinite(_as_float(v)) and 0 < v < _MAX_COORD for v in value)
     )
     if not ok:
-        raise MotionError(f"image_size must be [width, height] > 0, got {value!r}")
+        raise MotionError(f"image_size must be [width, height] > 0, got {str(value)[:80]}")
     return (float(value[0]), float(value[1]))
 
 

@@ -4,6 +4,8 @@ Options override the ``MOTION_*`` environment; they are passed on to the worker 
 through that environment, since each worker builds its own app with ``create_app()``.
 SIGINT/SIGTERM shut down gracefully (uvicorn's own handling): no new connections, in-flight
 requests get up to ``request_timeout_s`` to finish.
+
+Metrics of several workers: see :func:`prepare_metrics_dir`.
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
+from pathlib import Path
 
 from pydantic import ValidationError
 
@@ -33,6 +37,27 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def prepare_metrics_dir(workers: int) -> str | None:
+    """Make ``PROMETHEUS_MULTIPROC_DIR`` ready before any worker imports prometheus-client.
+
+    Set: create the folder and delete the ``*.db`` files an earlier run left there (their
+    counts would add to this run's). Unset with several workers: point it at a new temporary
+    folder, since one worker's registry only knows the requests that worker answered. Unset
+    with one worker: nothing (the process's own registry is exact). Returns the folder.
+    """
+    path = os.environ.get("PROMETHEUS_MULTIPROC_DIR")
+    if not path:
+        if workers <= 1:
+            return None
+        path = tempfile.mkdtemp(prefix="motion-metrics-")
+        os.environ["PROMETHEUS_MULTIPROC_DIR"] = path
+    folder = Path(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    for stale in folder.glob("*.db"):
+        stale.unlink(missing_ok=True)
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     overrides = {k: v for k, v in vars(args).items() if v is not None}
@@ -46,6 +71,8 @@ def main(argv: list[str] | None = None) -> None:
     for key, value in overrides.items():
         os.environ[f"MOTION_{key.upper()}"] = str(value)
 
+    prepare_metrics_dir(settings.workers)
+
     import uvicorn
 
     from service.log import log_config
@@ -56,7 +83,7 @@ def main(argv: list[str] | None = None) -> None:
         host=settings.host,
         port=settings.port,
         workers=settings.workers,
-        log_config=log_config(settings.log_level),
+        log_config=log_config(settings.log_level, settings.log_format),
         log_level=settings.log_level,
         access_log=False,  # the request-context middleware logs each request with its id
         timeout_graceful_shutdown=int(settings.request_timeout_s) + 1,

@@ -68,6 +68,11 @@ class Settings(BaseSettings):
     )
 
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+    log_format: Literal["text", "json"] = Field("text", description="json: one object a line")
+
+    debug_routes: bool = Field(
+        False, description="serve /_debug/* (slow requests for shutdown tests); never in production"
+    )
 
     @property
     def oversubscribed(self) -> bool:

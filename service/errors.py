@@ -35,10 +35,12 @@ Library code raises :class:`motion.errors.MotionError`; service code raises a
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping
 from http import HTTPStatus
 from typing import Any
 
+import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
@@ -48,6 +50,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import Scope
 
 from motion.errors import MotionError
+from service import metrics
 
 logger = logging.getLogger(__name__)
 
@@ -203,6 +206,31 @@ def request_id_of(scope: Scope) -> str | None:
     return state.get("request_id")
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` as plain JSON: numpy scalars and arrays become Python numbers and lists,
+    non-finite floats strings, bytes text, anything else unknown its ``str``. An extension
+    member must never turn an error answer into a 500."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    elif isinstance(value, np.ndarray):
+        value = value.tolist()
+    if value is None or isinstance(value, bool | int | str):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, bytes | bytearray):
+        return bytes(value).decode("utf-8", "replace")
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [json_safe(v) for v in value]
+    try:
+        encoded = jsonable_encoder(value)
+    except Exception:
+        return str(value)
+    return str(value) if encoded is value else json_safe(encoded)
+
+
 class ProblemResponse(JSONResponse):
     media_type = PROBLEM_MEDIA_TYPE
 
@@ -217,7 +245,8 @@ def problem_response(
     headers: Mapping[str, str] | None = None,
     **ext: Any,
 ) -> ProblemResponse:
-    """Build an RFC 9457 response for the request in ``scope``."""
+    """Build an RFC 9457 response for the request in ``scope`` (and count it by type)."""
+    metrics.count_error(slug)
     body: dict[str, Any] = {
         "type": PROBLEM_BASE + slug,
         "title": title,
@@ -225,7 +254,7 @@ def problem_response(
         "detail": detail,
         "instance": scope.get("path", ""),
     }
-    extensions = jsonable_encoder({k: v for k, v in ext.items() if v is not None})
+    extensions = {str(k): json_safe(v) for k, v in ext.items() if v is not None}
     body.update({k: v for k, v in extensions.items() if k not in body})
     request_id = request_id_of(scope)
     out_headers = dict(headers or {})
@@ -298,7 +327,9 @@ async def handle_http_exception(request: Request, exc: Exception) -> ProblemResp
     assert isinstance(exc, StarletteHTTPException)
     status = exc.status_code
     slug, title = problem_kind(status)
-    method, path = request.method, request.url.path
+    # scope["path"], not request.url: building the URL decodes the query string as UTF-8,
+    # and a client may send any bytes there
+    method, path = request.method, request.scope.get("path", "")
     if status == 404 and exc.detail == HTTPStatus.NOT_FOUND.phrase:
         detail = f"No resource at {path}"
     elif status == 405 and exc.detail == HTTPStatus.METHOD_NOT_ALLOWED.phrase:
@@ -314,7 +345,8 @@ async def handle_http_exception(request: Request, exc: Exception) -> ProblemResp
 async def handle_unexpected_error(request: Request, exc: Exception) -> ProblemResponse:
     """Last resort (Starlette's outermost error middleware); normally the request-context
     middleware has already answered and logged."""
-    logger.error("unhandled error in %s %s", request.method, request.url.path, exc_info=exc)
+    path = request.scope.get("path", "")
+    logger.error("unhandled error in %s %s", request.method, path, exc_info=exc)
     return internal_error_response(request.scope)
 
 

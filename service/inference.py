@@ -23,6 +23,7 @@ from typing import Any, TypeVar
 
 from starlette.requests import Request
 
+from service import metrics
 from service.errors import NotReady, Timeout
 
 T = TypeVar("T")
@@ -54,6 +55,7 @@ class InferenceRunner:
         context = contextvars.copy_context()
         future = self._executor.submit(context.run, functools.partial(fn, *args, **kwargs))
         self.in_flight += 1
+        metrics.IN_FLIGHT.inc()
         try:
             return await asyncio.wait_for(asyncio.wrap_future(future), self.timeout_s)
         except TimeoutError:
@@ -64,6 +66,7 @@ class InferenceRunner:
             ) from None
         finally:
             self.in_flight -= 1
+            metrics.IN_FLIGHT.dec()
 
 
 def get_runner(request: Request) -> InferenceRunner:

@@ -12,13 +12,16 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
+from service import metrics
 from service.config import Settings, available_cpus
 from service.engines import EngineFactory, import_family_engines
 from service.errors import install_error_handlers
 from service.inference import InferenceRunner
 from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
 from service.registry import ModelRegistry
-from service.routes import health, models, styles
+from service.routes import debug, health, models, styles, stylize
+from service.routes import metrics as metrics_routes
+from service.routes.preview import install_preview
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +48,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     finally:
         app.state.runner.close()
         app.state.registry.close()
+        metrics.mark_worker_dead()
 
 
 def create_app(
@@ -72,6 +76,10 @@ def create_app(
     app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
     app.add_middleware(RequestContextMiddleware)
 
-    for router in (health.router, models.router, styles.router):
+    for router in (health.router, models.router, styles.router, metrics_routes.router):
         app.include_router(router)
+    app.include_router(stylize.router)
+    if settings.debug_routes:
+        app.include_router(debug.router)
+    install_preview(app)
     return app

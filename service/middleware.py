@@ -13,8 +13,10 @@ import time
 import uuid
 
 from starlette.datastructures import Headers, MutableHeaders
+from starlette.routing import Mount, compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from service import metrics
 from service.errors import PayloadTooLarge, internal_error_response, service_error_response
 from service.log import request_id_var
 
@@ -36,10 +38,48 @@ def accept_request_id(value: str | None) -> str:
     return uuid.uuid4().hex
 
 
+def endpoint_of(scope: Scope) -> str:
+    """The route template that handled (or would have handled) the request, for metric labels:
+    ``/v1/models``, ``/static`` for the static mount, :data:`metrics.UNMATCHED` for none."""
+    path = getattr(scope.get("route"), "path", None)
+    if isinstance(path, str) and path:
+        return path
+    # Answered before routing (the upload limit) or no route matched: find the template.
+    app = scope.get("app")
+    if app is None:
+        return metrics.UNMATCHED
+    templates = getattr(app.state, "route_templates", None)
+    if templates is None:
+        templates = app.state.route_templates = _route_templates(app)
+    request_path = scope.get("path", "")
+    for regex, template in templates:
+        if regex.match(request_path):
+            return template
+    return metrics.UNMATCHED
+
+
+def _route_templates(app) -> list[tuple[re.Pattern, str]]:
+    """``(regex, template)`` for every documented path and every mount (``/static``)."""
+    out = []
+    try:
+        paths = list(app.openapi().get("paths", {}))
+    except Exception:  # a schema that cannot be built must not break the bookkeeping
+        error_logger.exception("cannot list the routes for metric labels")
+        paths = []
+    for template in paths:
+        out.append((compile_path(template)[0], template))
+    for route in app.routes:
+        if isinstance(route, Mount) and route.path:
+            out.append((re.compile(re.escape(route.path) + "(/.*)?$"), route.path))
+    return out
+
+
 class RequestContextMiddleware:
     """Gives each HTTP request an id (``scope["state"]["request_id"]`` and the log context),
-    echoes it as ``X-Request-Id``, writes one access-log line per request, and turns an
-    exception that escaped every handler into a logged 500 problem without a traceback."""
+    echoes it as ``X-Request-Id``, writes one access-log line per request (with ``method``,
+    ``path``, ``status`` and ``duration_ms`` as structured fields), counts it in the request
+    metrics, and turns an exception that escaped every handler into a logged 500 problem
+    without a traceback."""
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
@@ -72,9 +112,21 @@ class RequestContextMiddleware:
                 raise
             await internal_error_response(scope)(scope, receive, send_with_id)
         finally:
-            elapsed_ms = (time.perf_counter() - started_at) * 1000.0
+            elapsed = time.perf_counter() - started_at
+            method, path = scope["method"], scope["path"]
+            metrics.observe_request(endpoint_of(scope), method, status, elapsed)
             logger.info(
-                "%s %s %s %.1fms", scope["method"], scope["path"], status or "-", elapsed_ms
+                "%s %s %s %.1fms",
+                method,
+                path,
+                status or "-",
+                elapsed * 1000.0,
+                extra={
+                    "method": method,
+                    "path": path,
+                    "status": status or None,
+                    "duration_ms": round(elapsed * 1000.0, 3),
+                },
             )
             request_id_var.reset(token)
 

@@ -14,6 +14,7 @@ import threading
 from collections.abc import Mapping
 from typing import Any, Literal
 
+from service import metrics
 from service.config import Settings
 from service.engines import ENGINE_FACTORIES, Engine, EngineFactory, GenericEngine
 from service.errors import NotFound, NotReady
@@ -47,6 +48,7 @@ class ModelRegistry:
     def start(self) -> None:
         """Load in a background thread; :attr:`ready` turns true when it has succeeded."""
         self.state = "loading"
+        metrics.READY.set(0)
         self._thread = threading.Thread(target=self.load, name="model-loader", daemon=True)
         self._thread.start()
 
@@ -66,6 +68,7 @@ class ModelRegistry:
             self._loading = None
             failed = self.errors or not all(e.ready for e in self.engines.values())
             self.state = "failed" if failed else "ready"
+            self._record_metrics()
             self._done.set()
             logger.info(
                 "models %s: %d loaded, %d failed", self.state, self.n_ready, len(self.errors)
@@ -106,6 +109,12 @@ class ModelRegistry:
                 logger.exception("model %s failed to load", name)
                 self.errors[name] = f"{type(exc).__name__}: {exc}"
                 engine.close()
+
+    def _record_metrics(self) -> None:
+        """``motion_model_info`` per model of the manifest, and ``motion_ready``."""
+        entries = list(self.manifest.models) if self.manifest else []
+        loaded = {name: engine.ready for name, engine in self.engines.items()}
+        metrics.record_models(entries, loaded, self.ready)
 
     def close(self) -> None:
         """Stop loading (between models) and drop every session."""

@@ -1,0 +1,44 @@
+# syntax=docker/dockerfile:1
+# The service image: Python 3.11 slim, only the `serve` extra (onnxruntime; no torch, no
+# training or test tools), the shipped models/ baked in, a non-root user.
+#
+#   docker build -t motion-style .
+#   docker run -p 8000:8000 -e MOTION_WORKERS=2 -e MOTION_INTRA_OP_THREADS=1 motion-style
+#
+# Settings are MOTION_* variables (README); keep workers x intra-op threads <= the CPUs you
+# give the container. With several workers, `python -m service` points
+# PROMETHEUS_MULTIPROC_DIR at a fresh folder under /tmp so /metrics counts every worker.
+
+ARG PYTHON_IMAGE=python:3.11-slim-bookworm
+
+FROM ${PYTHON_IMAGE} AS build
+ENV PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
+RUN python -m venv /opt/venv
+COPY pyproject.toml deploy/serve_requirements.py /tmp/build/
+RUN python /tmp/build/serve_requirements.py /tmp/build/pyproject.toml > /tmp/build/requirements.txt \
+ && /opt/venv/bin/pip install --require-virtualenv -r /tmp/build/requirements.txt \
+ && /opt/venv/bin/python -c "import fastapi, onnxruntime, soundfile, soxr, uvicorn" \
+ && if /opt/venv/bin/python -c "import torch" 2>/dev/null; then echo "torch in the image" >&2; exit 1; fi
+
+FROM ${PYTHON_IMAGE} AS runtime
+ENV PATH=/opt/venv/bin:$PATH \
+    PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    MOTION_WORKERS=1 \
+    MOTION_LOG_FORMAT=json \
+    MOTION_MODELS_DIR=/app/models
+RUN groupadd --system --gid 10001 motion \
+ && useradd --system --uid 10001 --gid motion --no-create-home --home-dir /nonexistent \
+      --shell /usr/sbin/nologin motion
+COPY --from=build /opt/venv /opt/venv
+WORKDIR /app
+COPY motion/ motion/
+COPY service/ service/
+COPY models/ models/
+# Fail the build, not the first request, if the app cannot be built from what was copied.
+RUN python -c "import service.main; service.main.create_app()"
+USER 10001:10001
+EXPOSE 8000
+HEALTHCHECK --interval=15s --timeout=5s --start-period=60s --retries=3 \
+  CMD ["python", "-c", "import sys, urllib.request; sys.exit(0 if urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4).status == 200 else 1)"]
+CMD ["python", "-m", "service", "--host", "0.0.0.0", "--port", "8000"]
