@@ -37,3 +37,36 @@ test: $(VENV)/.dev
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
+
+# Loopback load test of a fresh `python -m service`: 16 clients x 60 s on the GET endpoints,
+# errors, p50/p95/p99 and RSS (the 8 x 5 s version runs in `make test`). LOAD_ARGS adds flags.
+LOAD_ARGS ?=
+.PHONY: load
+load: $(VENV)/.dev
+	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
+
+# aberman2020 translator on Bandai (CPU, hours). Resumes from checkpoints/translator.pt when it
+# exists; TensorBoard scalars in runs/translator/. Extra flags: TRANSLATOR_ARGS="--max-steps 100".
+TRANSLATOR_ARGS ?=
+.PHONY: train-translator
+train-translator: $(VENV)/.dev
+	$(PY) -m training.translator --threads 1 $(if $(wildcard checkpoints/translator.pt),--resume) $(TRANSLATOR_ARGS)
+
+# holden2017 fast style networks: the loss network (autoencoder), then one transformation
+# network per Bandai style, then ONNX + manifest entry "fast-bandai". Logs in runs/fast/,
+# weights in checkpoints/fast/. Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
+FAST_AE_ARGS ?= --steps 3600 --minutes 25
+FAST_STYLE_ARGS ?= --steps 800 --minutes-per-style 2
+.PHONY: train-fast export-fast eval-fast bench-fast
+train-fast: $(VENV)/.dev
+	$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS)
+	$(PY) -m training.fast_style --all $(FAST_STYLE_ARGS)
+
+export-fast: $(VENV)/.dev
+	$(PY) -m model_export.fast
+
+eval-fast: $(VENV)/.dev
+	@echo "eval-fast: not written yet (held-out takes: models/fast/split.json)"; exit 1
+
+bench-fast: $(VENV)/.dev
+	$(PY) -m bench.bench_fast

@@ -1,0 +1,102 @@
+"""The translator's torch side: FK parity with numpy, network shapes, a smoke training run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from motion import canonical as C  # noqa: E402
+from motion import features as Fe  # noqa: E402
+from motion import kinematics as K  # noqa: E402
+from motion import rotations as rot  # noqa: E402
+from tests.conftest import data_path  # noqa: E402
+from training import fk as tfk  # noqa: E402
+from training.translator import model as M  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def bandai_clips():
+    data_path("bandai", "dataset-1")
+    from training.data import load_bandai
+
+    clips = load_bandai(datasets=(1,))
+    return [clips[0], clips[len(clips) // 2], clips[-1]]
+
+
+def test_torch_fk_equals_numpy_fk(bandai_clips):
+    for clip in bandai_clips:
+        m = clip.motion
+        grot, gpos = K.fk(m.lrot, m.lpos, m.skeleton.parents)
+        lmat = tfk.matrix_from_quat(torch.tensor(m.lrot, dtype=torch.float64))
+        gmat_t, gpos_t = tfk.fk(lmat, torch.tensor(m.lpos, dtype=torch.float64), C.PARENTS)
+        scale = np.abs(gpos).max()
+        np.testing.assert_allclose(gpos_t.numpy(), gpos, rtol=1e-4, atol=1e-4 * scale)
+        np.testing.assert_allclose(gmat_t.numpy(), rot.to_matrix(grot), atol=1e-6)
+        # float32, as in training
+        gpos32 = tfk.fk(lmat.float(), torch.tensor(m.lpos, dtype=torch.float32), C.PARENTS)[1]
+        np.testing.assert_allclose(gpos32.numpy(), gpos, rtol=1e-4, atol=1e-4 * scale)
+
+
+def test_matrix_from_6d_matches_numpy():
+    r6 = np.random.default_rng(0).normal(size=(50, 6))
+    ours = tfk.matrix_from_6d(torch.tensor(r6)).numpy()
+    np.testing.assert_allclose(ours, rot.to_matrix(rot.from_6d(r6)), atol=1e-9)
+
+
+def test_root_local_fk_gives_the_3d_style_features(bandai_clips):
+    layer = tfk.RootLocalFK().double()
+    for clip in bandai_clips:
+        enc = Fe.encode(clip.motion)
+        content = torch.tensor(enc.content, dtype=torch.float64)
+        r6 = content[:, : Fe.OUTPUT_CHANNELS].reshape(-1, len(Fe.BODY), 6)
+        positions = layer(r6, content[:, Fe.ROTATION_CHANNELS]).reshape(len(content), -1)
+        np.testing.assert_allclose(positions.numpy(), enc.style3d, atol=1e-4)
+
+
+@pytest.mark.parametrize("frames", [4, 32, 37, 61, 64])
+@pytest.mark.parametrize("batch", [1, 3])
+def test_network_shapes(frames, batch):
+    cfg = M.ModelConfig(num_styles=5)
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg)
+    content = M.pad_time(torch.randn(batch, Fe.CONTENT_CHANNELS, frames))
+    padded = content.shape[-1]
+    assert padded % M.STRIDE == 0 and padded - frames < M.STRIDE
+    style3d = M.pad_time(torch.randn(batch, Fe.STYLE3D_CHANNELS, frames + 5))
+    style2d = M.pad_time(torch.randn(batch, Fe.STYLE2D_CHANNELS, 2 * frames))
+    with torch.no_grad():
+        code = g.content_encoder(content)
+        assert code.shape == (batch, cfg.content_channels[-1], padded // 2**cfg.content_down)
+        z3, z2 = g.style3d(style3d), g.style2d(style2d)
+        assert z3.shape == z2.shape == (batch, cfg.style_dim)
+        out = g.decoder(code, z3)
+        assert out.shape == (batch, Fe.OUTPUT_CHANNELS, padded)
+        assert out[..., :frames].shape[-1] == frames
+        scores, feats = d(torch.randn(batch, Fe.STYLE3D_CHANNELS + Fe.OUTPUT_CHANNELS, padded))
+        assert scores.shape[:2] == (batch, 5) and feats.shape[0] == batch
+
+
+def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
+    data_path("bandai", "dataset-1")
+    from training.translator import train as T
+
+    monkeypatch.setenv("MOTION_SMOKE", "1")
+    ckpt = tmp_path / "translator.pt"
+    args = [
+        "--clips-per-style", "3", "--val-fraction", "0.34", "--batch-size", "8", "--views", "2",
+        "--checkpoint", str(ckpt), "--log-dir", str(tmp_path / "runs"), "--threads", "1",
+    ]  # fmt: skip
+    T.main(args)
+    assert ckpt.exists()
+    assert (tmp_path / "translator_stats.npz").exists()
+    assert (tmp_path / "translator_config.json").exists()
+    saved = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert saved["step"] == 3 and saved["val_takes"]
+    assert set(saved["metrics"]) >= {"rec_pos_cm", "style_acc_3d"}
+    T.main(args + ["--resume"])
+    resumed = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert resumed["step"] == 6
+    assert resumed["val_takes"] == saved["val_takes"]
+    g, stats, meta = T.load_translator(ckpt)
+    assert meta["step"] == 6 and stats.mean["content"].shape == (Fe.CONTENT_CHANNELS,)

@@ -1,0 +1,3 @@
+from training.translator.train import main
+
+main()

@@ -1,0 +1,157 @@
+"""Bandai clips as translator features, and the batches of a training step.
+
+Every clip is encoded once by ``motion.features`` (content, 3D style, global positions);
+windows of ``T`` frames are cut at random starts (a superset of the paper's windows with
+overlap T/4), styles drawn uniformly so that rare styles get their share of the
+discriminator. 2D style inputs come from a bank of ``views`` projections of each whole
+clip (random yaw and scale, paper section 3.3) made once through
+``motion.features.style2d_from_positions``, the normalisation the service's keypoint path
+shares; whole clips, because a video is normalised as a whole too, and once, because the
+projection costs about a millisecond per call.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from motion import canonical as C
+from motion import features as Fe
+from training.data import Clip
+
+
+@dataclass
+class EncodedClip:
+    """One clip's features: ``content (F, 130)``, ``style3d (F, 63)``, 2D views
+    ``style2d (V, F, 32)`` float32, its style index and take."""
+
+    content: np.ndarray
+    style3d: np.ndarray
+    style2d: np.ndarray
+    style: int
+    take: str
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.content)
+
+
+def project_views(
+    gpos: np.ndarray, rng: np.random.Generator, views: int, toe_drop: float = 0.25
+) -> np.ndarray:
+    """2D style inputs ``(views, F, STYLE2D_CHANNELS)`` float32 of ``gpos (F, 22, 3)``.
+
+    Yaw uniform in [-90, 90] degrees and scale in [0.8, 1.2] (paper); with probability
+    ``toe_drop`` a view's toes sit on the ankles, as keypoint layouts without toes
+    (COCO) give them.
+    """
+    toes = [C.INDEX["Toes_L"], C.INDEX["Toes_R"]]
+    feet = [C.INDEX["Foot_L"], C.INDEX["Foot_R"]]
+    out = np.empty((views, len(gpos), Fe.STYLE2D_CHANNELS), dtype=np.float32)
+    for v in range(views):
+        g = gpos
+        if rng.random() < toe_drop:
+            g = gpos.copy()
+            g[:, toes] = g[:, feet]
+        yaw = np.deg2rad(rng.uniform(-90.0, 90.0))
+        out[v] = Fe.style2d_from_positions(g, yaw, rng.uniform(0.8, 1.2))
+    return out
+
+
+def encode_clips(
+    clips: list[Clip], styles: list[str], min_frames: int, views: int, seed: int
+) -> list[EncodedClip]:
+    """Clips with at least ``min_frames`` frames, encoded with ``views`` 2D projections each;
+    ``styles`` gives the style indices."""
+    index = {s: i for i, s in enumerate(styles)}
+    rng = np.random.default_rng(seed)
+    out = []
+    for clip in clips:
+        if clip.num_frames < min_frames:
+            continue
+        enc = Fe.encode(clip.motion)
+        style2d = project_views(enc.gpos, rng, views)
+        out.append(EncodedClip(enc.content, enc.style3d, style2d, index[clip.style], clip.take))
+    return out
+
+
+@dataclass
+class Windows:
+    """A batch of windows, frames first: ``content (B, T, 130)``, ``style3d (B, T, 63)``,
+    ``style2d (B, T, 32)`` (one random view each), ``style (B,)``."""
+
+    content: np.ndarray
+    style3d: np.ndarray
+    style2d: np.ndarray
+    style: np.ndarray
+
+
+def cut(
+    items: list[tuple[EncodedClip, int]], length: int, rng: np.random.Generator | None = None
+) -> Windows:
+    """Windows of ``length`` frames at the given ``(clip, start)`` pairs; the 2D view is
+    random with ``rng``, else the first."""
+    views = [int(rng.integers(len(c.style2d))) if rng is not None else 0 for c, _ in items]
+    return Windows(
+        content=np.stack([c.content[s : s + length] for c, s in items]),
+        style3d=np.stack([c.style3d[s : s + length] for c, s in items]),
+        style2d=np.stack(
+            [c.style2d[v, s : s + length] for (c, s), v in zip(items, views, strict=True)]
+        ),
+        style=np.array([c.style for c, _ in items]),
+    )
+
+
+class Sampler:
+    """Random windows by style: ``draw(styles)`` gives one window per requested style."""
+
+    def __init__(self, clips: list[EncodedClip], length: int, rng: np.random.Generator) -> None:
+        self.length = length
+        self.rng = rng
+        self.by_style: dict[int, list[EncodedClip]] = {}
+        for c in clips:
+            if c.num_frames >= length:
+                self.by_style.setdefault(c.style, []).append(c)
+        self.styles = np.array(sorted(self.by_style))
+        # clips weighted by how many windows they hold
+        self.weights = {
+            s: np.array([c.num_frames - length + 1 for c in cs], dtype=np.float64)
+            for s, cs in self.by_style.items()
+        }
+        for w in self.weights.values():
+            w /= w.sum()
+
+    def random_styles(self, count: int) -> np.ndarray:
+        return self.rng.choice(self.styles, size=count)
+
+    def other_styles(self, styles: np.ndarray) -> np.ndarray:
+        """A different style for each entry (uniform among the others)."""
+        offsets = self.rng.integers(1, len(self.styles), size=len(styles))
+        pos = np.searchsorted(self.styles, styles)
+        return self.styles[(pos + offsets) % len(self.styles)]
+
+    def pick(self, styles: np.ndarray) -> list[tuple[EncodedClip, int]]:
+        items = []
+        for s in styles:
+            cs = self.by_style[int(s)]
+            clip = cs[self.rng.choice(len(cs), p=self.weights[int(s)])]
+            items.append((clip, int(self.rng.integers(0, clip.num_frames - self.length + 1))))
+        return items
+
+
+def fixed_windows(
+    clips: list[EncodedClip], length: int, hop: int, limit: int, seed: int
+) -> list[tuple[EncodedClip, int]]:
+    """Evenly spaced windows (``hop`` frames apart) of the clips, at most ``limit`` of them
+    chosen reproducibly by ``seed``: the validation set."""
+    items = [
+        (c, s)
+        for c in clips
+        if c.num_frames >= length
+        for s in range(0, c.num_frames - length + 1, hop)
+    ]
+    rng = np.random.default_rng(seed)
+    if len(items) > limit:
+        items = [items[i] for i in sorted(rng.choice(len(items), size=limit, replace=False))]
+    return items

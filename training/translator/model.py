@@ -1,0 +1,236 @@
+"""The aberman2020 motion translator: content encoder, 3D and 2D style encoders, decoder with
+AdaIN, and the multi-style discriminator.
+
+Tensors are ``(B, C, T)`` (batch, channels, frames at 30 fps) of standardised
+``motion.features`` channels. Written for ONNX export as four graphs (content encoder,
+3D style encoder, 2D style encoder, decoder with its style MLP) with dynamic batch and
+time: no parameter is assigned at run time (AdaIN scale and shift are computed from the
+style code and passed along), pooling is ``amax``, no data-dependent Python control flow.
+
+``STRIDE`` frames: every graph needs ``T`` to be a multiple of it (pad with
+``motion.features.pad_frames`` or :func:`pad_time`, then crop the output back).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from motion import features as Fe
+
+STRIDE = 4  # 2 ** max(content_down, style_down); the config checks it
+
+
+@dataclass
+class ModelConfig:
+    """Sizes of the networks (saved with the weights)."""
+
+    content_in: int = Fe.CONTENT_CHANNELS
+    output: int = Fe.OUTPUT_CHANNELS
+    style3d_in: int = Fe.STYLE3D_CHANNELS
+    style2d_in: int = Fe.STYLE2D_CHANNELS
+    num_styles: int = 19
+    content_channels: list[int] = field(default_factory=lambda: [128, 160])
+    content_resblocks: int = 1
+    style_channels: list[int] = field(default_factory=lambda: [96, 128, 144])
+    style_dim: int = 128
+    mlp_hidden: int = 192
+    decoder_resblocks: int = 2
+    disc_channels: list[int] = field(default_factory=lambda: [96, 128, 160])
+    kernel: int = 5
+
+    @property
+    def content_down(self) -> int:
+        return len(self.content_channels) - 1
+
+    @property
+    def style_down(self) -> int:
+        return len(self.style_channels) - 1
+
+    def __post_init__(self) -> None:
+        if 2 ** max(self.content_down, self.style_down, len(self.disc_channels) - 1) > STRIDE:
+            raise ValueError(f"down-sampling exceeds STRIDE={STRIDE}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def pad_time(x: torch.Tensor, multiple: int = STRIDE) -> torch.Tensor:
+    """``x (B, C, T)`` with its last frame repeated up to a multiple of ``multiple``."""
+    extra = (-x.shape[-1]) % multiple
+    return F.pad(x, (0, extra), mode="replicate") if extra else x
+
+
+def conv(c_in: int, c_out: int, kernel: int, stride: int = 1) -> nn.Conv1d:
+    """Same-length (or exactly ``T / stride``) convolution for even ``T``."""
+    if stride == 1:
+        return nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2)
+    return nn.Conv1d(c_in, c_out, 2 * stride, stride=stride, padding=stride // 2)
+
+
+def adain(x: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor) -> torch.Tensor:
+    """``instance_norm(x) * scale + shift``; ``x (B, C, T)``, ``scale``/``shift (B, C)``."""
+    return F.instance_norm(x) * scale.unsqueeze(-1) + shift.unsqueeze(-1)
+
+
+class ResBlock(nn.Module):
+    """Two convolutions with instance norm and a skip (content encoder)."""
+
+    def __init__(self, channels: int, kernel: int) -> None:
+        super().__init__()
+        self.conv1 = conv(channels, channels, kernel)
+        self.conv2 = conv(channels, channels, kernel)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = F.leaky_relu(F.instance_norm(self.conv1(x)), 0.2)
+        return x + F.instance_norm(self.conv2(h))
+
+
+class AdaResBlock(nn.Module):
+    """Two convolutions with AdaIN and a skip (decoder); ``params (B, 4 * C)``."""
+
+    def __init__(self, channels: int, kernel: int) -> None:
+        super().__init__()
+        self.channels = channels
+        self.conv1 = conv(channels, channels, kernel)
+        self.conv2 = conv(channels, channels, kernel)
+
+    def forward(self, x: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+        s1, b1, s2, b2 = params.split(self.channels, dim=1)
+        h = F.leaky_relu(adain(self.conv1(x), 1.0 + s1, b1), 0.2)
+        return x + adain(self.conv2(h), 1.0 + s2, b2)
+
+
+class ContentEncoder(nn.Module):
+    """``(B, content_in, T)`` -> content code ``(B, content_channels[-1], T / 2**content_down)``.
+
+    Instance norm after every convolution strips the per-clip statistics (the style).
+    """
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        chans = cfg.content_channels
+        self.first = conv(cfg.content_in, chans[0], cfg.kernel)
+        self.down = nn.ModuleList(
+            conv(a, b, cfg.kernel, stride=2) for a, b in zip(chans[:-1], chans[1:], strict=True)
+        )
+        self.res = nn.ModuleList(
+            ResBlock(chans[-1], cfg.kernel) for _ in range(cfg.content_resblocks)
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = F.leaky_relu(F.instance_norm(self.first(x)), 0.2)
+        for layer in self.down:
+            h = F.leaky_relu(F.instance_norm(layer(h)), 0.2)
+        for block in self.res:
+            h = block(h)
+        return h
+
+
+class StyleEncoder(nn.Module):
+    """``(B, C_in, T)`` -> style code ``(B, style_dim)``: convolutions, no normalisation (it
+    would remove the style), global max pooling over time."""
+
+    def __init__(self, cfg: ModelConfig, channels_in: int) -> None:
+        super().__init__()
+        chans = cfg.style_channels
+        self.first = conv(channels_in, chans[0], cfg.kernel)
+        self.down = nn.ModuleList(
+            conv(a, b, cfg.kernel, stride=2) for a, b in zip(chans[:-1], chans[1:], strict=True)
+        )
+        self.last = nn.Conv1d(chans[-1], cfg.style_dim, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = F.leaky_relu(self.first(x), 0.2)
+        for layer in self.down:
+            h = F.leaky_relu(layer(h), 0.2)
+        return self.last(h).amax(dim=-1)
+
+
+class Decoder(nn.Module):
+    """Content code ``(B, C_z, T')`` and style code ``(B, style_dim)`` -> standardised output
+    rotations ``(B, output, T' * 2**content_down)``.
+
+    An MLP maps the style code to every AdaIN layer's scale and shift (the scale is
+    1 + its output, so a fresh network starts near plain instance norm).
+    """
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        chans = cfg.content_channels[::-1]
+        self.res = nn.ModuleList(
+            AdaResBlock(chans[0], cfg.kernel) for _ in range(cfg.decoder_resblocks)
+        )
+        self.up = nn.ModuleList(
+            conv(a, b, cfg.kernel) for a, b in zip(chans[:-1], chans[1:], strict=True)
+        )
+        self.last = conv(chans[-1], cfg.output, cfg.kernel)
+        # AdaIN parameter count per layer, in the order forward consumes them
+        self.param_sizes = [4 * chans[0]] * cfg.decoder_resblocks + [2 * c for c in chans[1:]]
+        self.mlp = nn.Sequential(
+            nn.Linear(cfg.style_dim, cfg.mlp_hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(cfg.mlp_hidden, cfg.mlp_hidden),
+            nn.LeakyReLU(0.2),
+            nn.Linear(cfg.mlp_hidden, sum(self.param_sizes)),
+        )
+
+    def forward(self, content: torch.Tensor, style: torch.Tensor) -> torch.Tensor:
+        params = self.mlp(style).split(self.param_sizes, dim=1)
+        h = content
+        for block, p in zip(self.res, params, strict=False):
+            h = block(h, p)
+        for layer, p in zip(self.up, params[len(self.res) :], strict=True):
+            h = F.interpolate(h, scale_factor=2.0, mode="nearest")
+            scale, shift = p.split(p.shape[1] // 2, dim=1)
+            h = F.leaky_relu(adain(layer(h), 1.0 + scale, shift), 0.2)
+        return self.last(h)
+
+
+class Discriminator(nn.Module):
+    """Multi-style discriminator (FUNIT's multi-task one): ``(B, C_in, T)`` -> per-style
+    scores ``(B, num_styles, T / 2**n)`` and the last features ``(B, C, T / 2**n)``.
+
+    Reads root-local positions and rotations (both standardised), so it judges poses and
+    joint twists alike.
+    """
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        chans = cfg.disc_channels
+        self.first = conv(cfg.style3d_in + cfg.output, chans[0], cfg.kernel)
+        self.down = nn.ModuleList(
+            conv(a, b, cfg.kernel, stride=2) for a, b in zip(chans[:-1], chans[1:], strict=True)
+        )
+        self.head = nn.Conv1d(chans[-1], cfg.num_styles, 1)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = F.leaky_relu(self.first(x), 0.2)
+        for layer in self.down:
+            h = F.leaky_relu(layer(h), 0.2)
+        return self.head(h), h
+
+
+class Translator(nn.Module):
+    """The generator's parts together: ``content_encoder``, ``style3d``, ``style2d``,
+    ``decoder`` (each one exportable graph)."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.content_encoder = ContentEncoder(cfg)
+        self.style3d = StyleEncoder(cfg, cfg.style3d_in)
+        self.style2d = StyleEncoder(cfg, cfg.style2d_in)
+        self.decoder = Decoder(cfg)
+
+    def forward(self, content: torch.Tensor, style3d: torch.Tensor) -> torch.Tensor:
+        """Content ``(B, content_in, T)`` restyled by a 3D style clip ``(B, style3d_in, T2)``;
+        both ``T`` multiples of ``STRIDE``."""
+        return self.decoder(self.content_encoder(content), self.style3d(style3d))
+
+
+def count_parameters(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
