@@ -70,3 +70,21 @@ eval-fast: $(VENV)/.dev
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
+
+# Dance (jacob2019 made to work): the alignment study writes training/dance_alignment.json;
+# training resumes from checkpoints/dance.pt when it exists (TensorBoard in runs/dance/).
+# Extra flags: DANCE_ARGS="--max-steps 100 --minutes 60". eval-dance: held-out songs' beat
+# alignment (raw and beat-warped) vs real dances and chance, 10-minute energy, genre accuracy.
+DANCE_ARGS ?=
+.PHONY: dance-alignment train-dance export-dance eval-dance
+dance-alignment: $(VENV)/.dev
+	$(PY) -m training.dance_alignment --write
+
+train-dance: $(VENV)/.dev
+	$(PY) -m training.dance --threads 2 $(if $(wildcard checkpoints/dance.pt),--resume) $(DANCE_ARGS)
+
+export-dance: $(VENV)/.dev
+	$(PY) -m model_export.dance
+
+eval-dance: $(VENV)/.dev
+	$(PY) -m training.dance --eval

@@ -19,7 +19,7 @@ from service.errors import install_error_handlers
 from service.inference import InferenceRunner
 from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
 from service.registry import ModelRegistry
-from service.routes import debug, health, models, styles, stylize
+from service.routes import dance, debug, health, models, styles, stylize
 from service.routes import metrics as metrics_routes
 from service.routes.preview import install_preview
 
@@ -79,6 +79,7 @@ def create_app(
     for router in (health.router, models.router, styles.router, metrics_routes.router):
         app.include_router(router)
     app.include_router(stylize.router)
+    app.include_router(dance.router)
     if settings.debug_routes:
         app.include_router(debug.router)
     install_preview(app)

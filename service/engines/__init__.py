@@ -32,7 +32,10 @@ EngineFactory = Callable[[ModelEntry, Path, Settings], Engine]
 ENGINE_FACTORIES: dict[str, EngineFactory] = {}
 
 # Modules that register a family's engine when imported, e.g. "service.engines.translator".
-FAMILY_MODULES: tuple[str, ...] = ("service.engines.fast",)
+FAMILY_MODULES: tuple[str, ...] = (
+    "service.engines.fast",
+    "service.engines.dance",
+)
 
 
 def register_engine(family: str, factory: EngineFactory) -> None:

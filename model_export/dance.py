@@ -1,0 +1,253 @@
+"""Export the dance network (jacob2019, made to work) to ONNX and list it in the manifest.
+
+    python -m model_export.dance [--checkpoint checkpoints/dance.pt] [--models-dir models]
+
+Two graphs, both with a symbolic batch axis:
+
+- ``audio``: ``audio (batch, time, 97)`` standardised song features -> ``code (batch, time,
+  128)`` and ``genre_probs (batch, 4)`` (the classifier head over the music genres);
+- ``step``: one frame of generation with the LSTM states explicit, ``code (batch, 128)``,
+  ``genre (batch, 7)`` (one-hot or probabilities), ``prev (batch, 134)`` standardised pose,
+  ``h1, c1, h2, c2 (batch, hidden)`` -> ``pose (batch, 134)`` and ``h1_out .. c2_out``.
+
+Writes ``models/dance/{audio,step}.onnx`` and ``models/dance/stats.npz`` (feature statistics
+and the seeded start poses) and the manifest entry ``dance-dwm``. Parity with torch is
+checked before listing: the audio graph at several shapes, the step graph over
+``PARITY_STEPS`` autoregressive steps (its own outputs fed back, as the service runs it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import shutil
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from model_export import manifest as MF
+from motion import dance_features as DF
+from training import dance as TD
+
+OPSET = 17
+MODEL_NAME = "dance-dwm"
+FOLDER = "dance"
+PARITY_STEPS = 100
+RTOL, ATOL = 1e-4, 1e-4
+AUDIO_SHAPES = [(1, 1), (1, 64), (2, 257)]
+TRAINING_DATA = [
+    "Dance with Melody (Tang et al. 2018; research only, no licence stated; commercial music)",
+    "CMU Graphics Lab Motion Capture Database, salsa / Indian / modern dance takes (CMU terms)",
+]
+LICENCE = "research and evaluation only (Dance with Melody has no licence; its music is commercial)"
+STATE_NAMES = ("h1", "c1", "h2", "c2")
+
+
+class AudioGraph(nn.Module):
+    def __init__(self, model: TD.DanceNet) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, audio: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        code, logits = self.model.encode_audio(audio)
+        return code, torch.softmax(logits, dim=-1)
+
+
+class StepGraph(nn.Module):
+    def __init__(self, model: TD.DanceNet) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, code, genre, prev, h1, c1, h2, c2):
+        return self.model.step(code, genre, prev, h1, c1, h2, c2)
+
+
+def _export(module, args, path: Path, inputs, outputs, dynamic) -> None:
+    module.eval()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            module,
+            args,
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=list(inputs),
+            output_names=list(outputs),
+            dynamic_axes=dynamic,
+        )
+    import onnx
+
+    onnx.checker.check_model(onnx.load(str(path)))
+
+
+def export_graphs(model: TD.DanceNet, out: Path) -> None:
+    """``audio.onnx`` and ``step.onnx`` of ``model`` (eval mode) into folder ``out``."""
+    model.eval()
+    hidden, code = model.config.hidden, model.config.code
+    _export(
+        AudioGraph(model),
+        (torch.zeros(1, 16, DF.AUDIO_CHANNELS),),
+        out / "audio.onnx",
+        ["audio"],
+        ["code", "genre_probs"],
+        {"audio": {0: "batch", 1: "time"}, "code": {0: "batch", 1: "time"},
+         "genre_probs": {0: "batch"}},
+    )  # fmt: skip
+    step_inputs = ["code", "genre", "prev", *STATE_NAMES]
+    step_outputs = ["pose", *(f"{n}_out" for n in STATE_NAMES)]
+    zeros = torch.zeros(1, hidden)
+    _export(
+        StepGraph(model),
+        (torch.zeros(1, code), torch.zeros(1, len(DF.GENRES)),
+         torch.zeros(1, DF.MOTION_CHANNELS), zeros, zeros, zeros, zeros),
+        out / "step.onnx",
+        step_inputs,
+        step_outputs,
+        {name: {0: "batch"} for name in step_inputs + step_outputs},
+    )  # fmt: skip
+
+
+def graph_specs(model: TD.DanceNet) -> dict:
+    hidden, code = model.config.hidden, model.config.code
+    states = [(n, ["batch", hidden]) for n in STATE_NAMES]
+    return {
+        "audio": MF.graph_spec(
+            f"{FOLDER}/audio.onnx",
+            OPSET,
+            [("audio", ["batch", "time", DF.AUDIO_CHANNELS])],
+            [("code", ["batch", "time", code]), ("genre_probs", ["batch", len(DF.MUSIC_GENRES)])],
+        ),
+        "step": MF.graph_spec(
+            f"{FOLDER}/step.onnx",
+            OPSET,
+            [("code", ["batch", code]), ("genre", ["batch", len(DF.GENRES)]),
+             ("prev", ["batch", DF.MOTION_CHANNELS]), *states],
+            [("pose", ["batch", DF.MOTION_CHANNELS]), *((f"{n}_out", s) for n, s in states)],
+        ),
+    }  # fmt: skip
+
+
+def parity(model: TD.DanceNet, out: Path, seed: int = 0, steps: int = PARITY_STEPS) -> dict:
+    """Largest absolute differences torch vs onnxruntime: the audio graph at
+    :data:`AUDIO_SHAPES`, the step graph over ``steps`` autoregressive steps (batch 2).
+    Raises ``RuntimeError`` outside ``rtol``/``atol``."""
+    import onnxruntime as ort
+
+    model.eval()
+    gen = torch.Generator().manual_seed(seed)
+    audio = ort.InferenceSession(str(out / "audio.onnx"), providers=["CPUExecutionProvider"])
+    worst_audio = 0.0
+    for batch, frames in AUDIO_SHAPES:
+        x = torch.randn(batch, frames, DF.AUDIO_CHANNELS, generator=gen)
+        with torch.no_grad():
+            want = [t.numpy() for t in AudioGraph(model)(x)]
+        got = audio.run(None, {"audio": x.numpy()})
+        for g, w in zip(got, want, strict=True):
+            if g.shape != w.shape or not np.allclose(g, w, rtol=RTOL, atol=ATOL):
+                raise RuntimeError(f"audio.onnx: parity fails at batch {batch}, time {frames}")
+            worst_audio = max(worst_audio, float(np.abs(g - w).max()))
+
+    step = ort.InferenceSession(str(out / "step.onnx"), providers=["CPUExecutionProvider"])
+    batch = 2
+    code = torch.randn(batch, steps, model.config.code, generator=gen).relu()
+    genre = torch.softmax(torch.randn(batch, len(DF.GENRES), generator=gen), -1)
+    prev_t = prev_o = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
+    state_t = model.init_state(batch)
+    state_o = [s.numpy() for s in state_t]
+    prev_o = prev_o.numpy()
+    worst_step = 0.0
+    for t in range(steps):
+        with torch.no_grad():
+            prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
+        feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_o}
+        feeds.update(dict(zip(STATE_NAMES, state_o, strict=True)))
+        prev_o, *state_o = step.run(None, feeds)
+        for g, w in zip([prev_o, *state_o], [prev_t, *state_t], strict=True):
+            w = w.numpy()
+            if not np.allclose(g, w, rtol=RTOL, atol=ATOL):
+                raise RuntimeError(f"step.onnx: parity fails at step {t}")
+            worst_step = max(worst_step, float(np.abs(g - w).max()))
+    return {"audio": worst_audio, "step": worst_step, "steps": steps}
+
+
+def export_bundle(
+    model: TD.DanceNet,
+    stats: DF.DanceStats,
+    start_poses: np.ndarray,
+    models_dir: Path,
+    *,
+    metrics: dict | None = None,
+    extra: dict | None = None,
+    trained_at: str | None = None,
+    name: str = MODEL_NAME,
+) -> dict:
+    """Graphs, statistics and the manifest entry of one dance bundle under ``models_dir``
+    (replacing an entry of the same name). Returns the entry."""
+    out = Path(models_dir) / FOLDER
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    export_graphs(model, out)
+    checks = parity(model, out)
+    stats.save(out / "stats.npz", start_poses=np.asarray(start_poses, np.float32))
+    entry = {
+        "name": name,
+        "family": "dance",
+        "version": f"{dt.date.today().isoformat()}.1",
+        "files": [f"{FOLDER}/audio.onnx", f"{FOLDER}/step.onnx", f"{FOLDER}/stats.npz"],
+        "graphs": graph_specs(model),
+        "training_data": TRAINING_DATA,
+        "licence": LICENCE,
+        "trained_at": trained_at,
+        "metrics": {**(metrics or {}), "parity_max_abs": checks, "parity_rtol": RTOL},
+        "extra": {
+            "paper": "jacob2019 genre-based dance generation (audio -> FC -> 2 LSTM)",
+            "stats": f"{FOLDER}/stats.npz",
+            "genres": list(DF.GENRES),
+            "music_genres": list(DF.MUSIC_GENRES),
+            "hidden": model.config.hidden,
+            "fps": DF.FPS,
+            "audio_channels": DF.AUDIO_CHANNELS,
+            "motion_channels": DF.MOTION_CHANNELS,
+            **(extra or {}),
+        },
+    }
+    MF.put_entry(entry, Path(models_dir))
+    return entry
+
+
+def main(argv: list[str] | None = None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--checkpoint", type=Path, default=TD.CHECKPOINT)
+    p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
+    args = p.parse_args(argv)
+    model, stats, ckpt = TD.load_checkpoint(args.checkpoint)
+    from training.dance_alignment import load_table
+
+    summary = load_table()["summary"]
+    entry = export_bundle(
+        model,
+        stats,
+        ckpt["start_poses"],
+        args.models_dir,
+        metrics={"steps": int(ckpt["step"]), "best_val": ckpt.get("best_val")},
+        extra={
+            "alignment": {
+                "global_rate": summary["global_rate"],
+                "verified": summary["verified"],
+                "rate_corrected": summary["rate_corrected"],
+            },
+            "validation_takes": list(TD.VAL_TAKES),
+        },
+        trained_at=ckpt.get("saved_at"),
+    )
+    print(f"manifest: {entry['name']} {entry['metrics']['parity_max_abs']}")
+    return entry
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,78 @@
+"""Add or replace one model entry in ``models/manifest.json``, hashing its files.
+
+Every family's export script calls :func:`put_entry` with the files it wrote (relative to the
+models folder); the entry is validated against the service's schema
+(``service.manifest.ModelEntry``) before the manifest is rewritten atomically, and other
+entries are left as they are (another family's export may run at another time).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from service.manifest import MANIFEST_NAME, SCHEMA_VERSION, Manifest, ModelEntry, sha256_of
+
+REPO = Path(__file__).resolve().parent.parent
+MODELS_DIR = REPO / "models"
+
+
+def graph_spec(
+    file: str, opset: int, inputs: list[tuple[str, list]], outputs: list[tuple[str, list]]
+) -> dict[str, Any]:
+    """A ``graphs`` item: ``inputs``/``outputs`` as ``(name, shape)`` pairs, float32."""
+
+    def tensors(items):
+        return [{"name": n, "dtype": "float32", "shape": list(s)} for n, s in items]
+
+    return {"file": file, "opset": opset, "inputs": tensors(inputs), "outputs": tensors(outputs)}
+
+
+def put_entry(
+    entry: dict[str, Any], models_dir: Path = MODELS_DIR, replace_prefix: str | None = None
+) -> ModelEntry:
+    """Hash ``entry["files"]`` (a list of paths, or of ``{"path"}`` dicts, relative to
+    ``models_dir``), validate and write the entry into the manifest, replacing any entry
+    of the same name (and, with ``replace_prefix``, every entry whose name starts with it).
+    Returns the validated entry."""
+    models_dir = Path(models_dir)
+    entry = dict(entry)
+    files = []
+    for item in entry["files"]:
+        path = item if isinstance(item, str) else item["path"]
+        files.append({"path": path, "sha256": sha256_of(models_dir / path)})
+    entry["files"] = files
+    model = ModelEntry.model_validate(entry)
+
+    path = models_dir / MANIFEST_NAME
+    if path.exists():
+        doc = json.loads(path.read_text())
+    else:
+        doc = {"schema_version": SCHEMA_VERSION, "models": []}
+    models = [
+        m
+        for m in doc.get("models", [])
+        if m.get("name") != model.name
+        and not (replace_prefix and str(m.get("name", "")).startswith(replace_prefix))
+    ]
+    models.append(model.model_dump(mode="json"))
+    doc = {"schema_version": SCHEMA_VERSION, "models": models}
+    Manifest.model_validate(doc)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc, indent=1) + "\n")
+    os.replace(tmp, path)
+    return model
+
+
+def remove_entries(prefix: str, models_dir: Path = MODELS_DIR) -> None:
+    """Drop every entry whose name starts with ``prefix``."""
+    path = Path(models_dir) / MANIFEST_NAME
+    if not path.exists():
+        return
+    doc = json.loads(path.read_text())
+    doc["models"] = [m for m in doc.get("models", []) if not m["name"].startswith(prefix)]
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc, indent=1) + "\n")
+    os.replace(tmp, path)

@@ -1,0 +1,330 @@
+"""The dance network's encodings (jacob2019, made to work), shared by training and serving.
+
+Per motion frame at 30 fps (canonical skeleton), numpy only, so PyTorch training and the
+onnxruntime service compute the same numbers.
+
+Audio input ``(F, AUDIO_CHANNELS)``: ``motion.audio.AudioFeatures.matrix()`` (log-mel 64,
+the thesis's spectral summary 30: MFCCs, chroma, centroid, bandwidth, rolloff, flatness,
+RMS; onset strength; beat phase as sin/cos). Beat sin/cos are left unstandardised, and
+both 0 means "beat unknown" (music whose pairing with its dance was not verified; motion
+without music). :func:`song_features` computes them for a song excerpt with the beat grid
+of the whole song.
+
+Genre: an index into :data:`GENRES` (the four music genres of Dance with Melody, then the
+CMU dances that have no music), given to the network as a one-hot (or probability) vector.
+
+Motion ``(F, MOTION_CHANNELS)``, in this channel order:
+
+- ``ROTATION_CHANNELS`` (126): the 21 body joints' rotations as 6D (two matrix columns):
+  Hips relative to the facing frame (so the hips never carry the heading: the thesis's
+  180-degree hip flips cannot be expressed), the others local;
+- ``ROOT_CHANNELS`` (4): Hips height, root velocity on the floor in the facing frame
+  (sideways, forward), all in leg lengths (per second), and turning velocity (rad/s);
+- ``CONTACT_CHANNELS`` (4): foot contacts of Foot_L, Toes_L, Foot_R, Toes_R as 0/1.
+
+:func:`decode` inverts :func:`encode` (integrating the root velocity and turning from a
+start point and heading). :class:`DanceStats` standardises both sides (``.npz`` beside the
+model). Arrays are ``(F, C)`` float32, frames first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from motion import audio
+from motion import canonical as C
+from motion import contacts as CT
+from motion import kinematics as K
+from motion import rotations as rot
+from motion.errors import MotionError
+from motion.skeleton import Motion
+
+FPS = C.FPS
+LEG = C.leg_length()
+HIPS = C.INDEX["Hips"]
+BODY = np.arange(1, len(C.JOINTS))  # every joint but joint_Root (which never moves)
+FACING_JOINTS = tuple(C.INDEX[n] for n in ("UpperLeg_L", "UpperLeg_R", "UpperArm_L", "UpperArm_R"))
+FACING_SMOOTH = 2.0  # Gaussian sigma in frames
+FOOT_JOINTS = list(CT.CANONICAL_FOOT_JOINTS)  # Foot_L, Toes_L, Foot_R, Toes_R
+
+GENRES = ("cha-cha", "rumba", "tango", "waltz", "salsa", "indian", "modern")
+MUSIC_GENRES = GENRES[:4]
+"""Genres with music in the training data: the ones the audio classifier head predicts."""
+
+AUDIO_CHANNELS = audio.FEATURE_DIM
+BEAT_COLUMNS = slice(AUDIO_CHANNELS - 2, AUDIO_CHANNELS)  # beat_sin, beat_cos
+
+ROTATION_CHANNELS = 6 * len(BODY)
+ROOT_CHANNELS = 4
+CONTACT_CHANNELS = len(FOOT_JOINTS)
+MOTION_CHANNELS = ROTATION_CHANNELS + ROOT_CHANNELS + CONTACT_CHANNELS
+ROTATIONS = slice(0, ROTATION_CHANNELS)
+HEIGHT = ROTATION_CHANNELS
+VELOCITY = slice(ROTATION_CHANNELS + 1, ROTATION_CHANNELS + 3)
+TURN = ROTATION_CHANNELS + 3
+CONTACTS = slice(ROTATION_CHANNELS + ROOT_CHANNELS, MOTION_CHANNELS)
+
+
+def genre_index(name: str) -> int:
+    """Index of genre ``name`` in :data:`GENRES` (``MotionError`` kind "invalid" if unknown)."""
+    try:
+        return GENRES.index(name)
+    except ValueError:
+        raise MotionError(f"unknown genre {name!r}; genres are {', '.join(GENRES)}") from None
+
+
+def genre_vector(name: str | None = None, probabilities: np.ndarray | None = None) -> np.ndarray:
+    """``(len(GENRES),)`` float32: one-hot of ``name``, or ``probabilities`` over
+    :data:`MUSIC_GENRES` placed in their slots."""
+    out = np.zeros(len(GENRES), dtype=np.float32)
+    if name is not None:
+        out[genre_index(name)] = 1.0
+    elif probabilities is not None:
+        out[: len(MUSIC_GENRES)] = np.asarray(probabilities, dtype=np.float32)
+    return out
+
+
+# --------------------------------------------------------------------------- audio
+
+
+def song_features(
+    samples: np.ndarray,
+    sr: int,
+    num_frames: int,
+    *,
+    offset: float = 0.0,
+    beats: np.ndarray | None = None,
+    tempo: float | None = None,
+) -> np.ndarray:
+    """Audio input ``(num_frames, AUDIO_CHANNELS)`` float32 for frames at 30 fps starting
+    ``offset`` seconds into the song ``samples (N,)`` (negative: silence before the song).
+
+    ``beats`` (seconds on the song's clock, default: tracked on the excerpt itself) give the
+    beat phase, so an excerpt of a song gets the phase of the whole song's beat grid.
+    """
+    start = int(round(offset * sr))
+    stop = start + int(np.ceil(num_frames / FPS * sr)) + 1
+    lo, hi = max(start, 0), max(min(stop, len(samples)), 0)
+    excerpt = np.zeros(stop - start, dtype=np.float32)
+    if hi > lo:
+        excerpt[lo - start : hi - start] = samples[lo:hi]
+    if not np.any(excerpt):
+        excerpt[0] = 1e-6  # all silence: features at the floor, no beats
+    feats = audio.frame_features(excerpt, sr, FPS, num_frames)
+    x = feats.matrix()
+    if beats is not None:
+        beats = np.asarray(beats, dtype=np.float64) - offset
+        period = 60.0 / tempo if tempo else None
+        phase = audio.beat_phase(beats, num_frames, FPS, period=period).astype(np.float64)
+        x[:, BEAT_COLUMNS] = np.stack(
+            [np.sin(2 * np.pi * phase), np.cos(2 * np.pi * phase)], axis=-1
+        )
+    return x
+
+
+def drop_beats(x: np.ndarray) -> np.ndarray:
+    """A copy of audio input ``x (..., AUDIO_CHANNELS)`` with the beat marked unknown (0, 0)."""
+    out = np.array(x, dtype=np.float32, copy=True)
+    out[..., BEAT_COLUMNS] = 0.0
+    return out
+
+
+# --------------------------------------------------------------------------- motion
+
+
+def _check(motion: Motion) -> None:
+    if motion.skeleton.names != C.JOINTS or abs(motion.fps - FPS) > 1e-3:
+        raise MotionError(
+            f"dance features need a canonical motion at {FPS:g} fps, got "
+            f"{motion.skeleton.num_joints} joints at {motion.fps:g} fps",
+            kind="unusable",
+        )
+
+
+@dataclass(frozen=True)
+class Encoded:
+    """``features (F, MOTION_CHANNELS)`` float32, and where decoding must start to land where
+    the clip started: ``start (3,)`` the root on the floor at frame 0, ``heading`` radians."""
+
+    features: np.ndarray
+    start: np.ndarray
+    heading: float
+
+
+CONTACT_HEIGHT = 0.12  # leg lengths above the local ground
+CONTACT_SPEED = 0.3  # leg lengths per second
+GROUND_WINDOW_SECONDS = 2.0
+
+
+def dance_contacts(gpos: np.ndarray, fps: float = FPS) -> np.ndarray:
+    """Foot contacts ``(F, 4)`` bool of Foot_L, Toes_L, Foot_R, Toes_R from canonical global
+    positions ``gpos (F, 22, 3)``: slow on the floor (under ``CONTACT_SPEED``) and within
+    ``CONTACT_HEIGHT`` of the local ground, the lowest foot joint's height over a sliding
+    ``GROUND_WINDOW_SECONDS`` (the Dance with Melody floor drifts by several cm within a
+    dance, so ``contacts.foot_contacts``'s clip-wide ground level misses most contacts)."""
+    from scipy.ndimage import minimum_filter1d
+
+    gpos = np.asarray(gpos, dtype=np.float64)
+    feet = gpos[:, FOOT_JOINTS]
+    if len(gpos) == 0:
+        return np.zeros((0, len(FOOT_JOINTS)), dtype=bool)
+    window = max(1, int(round(GROUND_WINDOW_SECONDS * fps)) | 1)
+    ground = minimum_filter1d(feet[..., 1].min(axis=1), window, mode="nearest")
+    low = feet[..., 1] - ground[:, None] < CONTACT_HEIGHT * LEG
+    slow = CT.horizontal_speed(feet, fps) < CONTACT_SPEED * LEG
+    min_frames = max(1, int(round(CT.MIN_CONTACT_SECONDS * fps)))
+    return CT.clean_contacts(low & slow, min_frames)
+
+
+def encode(motion: Motion, contacts: np.ndarray | None = None) -> Encoded:
+    """The encoding of a canonical motion at 30 fps; ``contacts (F, 4)`` default to
+    :func:`dance_contacts`."""
+    _check(motion)
+    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
+    dirs = K.facing_directions(gpos, *FACING_JOINTS, smooth=FACING_SMOOTH)
+    face = K.facing_rotations(dirs)
+    lrot = motion.lrot[:, BODY].copy()
+    lrot[:, 0] = rot.mul(rot.inv(face), grot[:, HIPS])
+    hips = gpos[:, HIPS]
+    root = hips * np.array([1.0, 0.0, 1.0])
+    vel, turn = K.root_velocities(root, face, motion.fps)
+    if contacts is None:
+        contacts = dance_contacts(gpos, motion.fps)
+    frames = motion.num_frames
+    features = np.concatenate(
+        [
+            rot.to_6d(lrot).reshape(frames, -1),
+            hips[:, 1:2] / LEG,
+            vel / LEG,
+            turn[:, None],
+            np.asarray(contacts, dtype=np.float64).reshape(frames, CONTACT_CHANNELS),
+        ],
+        axis=-1,
+    )
+    return Encoded(
+        features.astype(np.float32), root[0].copy(), float(np.arctan2(dirs[0, 0], dirs[0, 2]))
+    )
+
+
+def decode(
+    features: np.ndarray,
+    start: np.ndarray | None = None,
+    heading: float = 0.0,
+    fps: float = FPS,
+) -> tuple[Motion, np.ndarray]:
+    """A canonical motion and contacts ``(F, 4)`` bool from raw (not standardised) features
+    ``(F, MOTION_CHANNELS)``.
+
+    The root starts at ``start`` (on the floor; the origin by default) facing ``heading``;
+    the step from frame t to t + 1 is frame t's velocity turned by frame t's heading.
+    """
+    x = np.asarray(features, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != MOTION_CHANNELS:
+        raise MotionError(f"dance features must be (frames, {MOTION_CHANNELS}), got {x.shape}")
+    frames = len(x)
+    angle = heading + np.concatenate([[0.0], np.cumsum(x[:-1, TURN]) / fps])
+    face = rot.about_y(angle)
+    step = np.zeros((frames, 3))
+    step[:, [0, 2]] = x[:, VELOCITY] * LEG / fps
+    world_step = rot.apply(face, step)
+    origin = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64) * [1, 0, 1]
+    root = origin + np.concatenate([np.zeros((1, 3)), np.cumsum(world_step[:-1], axis=0)])
+    lrot = rot.identity((frames, len(C.JOINTS)))
+    body = rot.from_6d(x[:, ROTATIONS].reshape(frames, len(BODY), 6))
+    lrot[:, BODY] = body
+    lrot[:, HIPS] = rot.mul(face, body[:, 0])
+    lrot = rot.make_continuous(lrot)
+    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
+    lpos[:, 0] = 0.0
+    lpos[:, HIPS] = root + np.stack(
+        [np.zeros(frames), x[:, HEIGHT] * LEG, np.zeros(frames)], axis=-1
+    )
+    return Motion(C.SKELETON, float(fps), lrot, lpos), x[:, CONTACTS] > 0.5
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@dataclass(frozen=True)
+class DanceStats:
+    """Per-channel ``mean``/``std`` of the audio ``(AUDIO_CHANNELS,)`` and motion
+    ``(MOTION_CHANNELS,)`` inputs, float32."""
+
+    audio_mean: np.ndarray
+    audio_std: np.ndarray
+    motion_mean: np.ndarray
+    motion_std: np.ndarray
+
+    @staticmethod
+    def fit(audio_features: list[np.ndarray], motion_features: list[np.ndarray]) -> DanceStats:
+        """Statistics of lists of ``(F_i, C)`` arrays. Beat sin/cos keep mean 0, std 1 (so
+        (0, 0) stays "unknown"); contacts map to -1/+1; every std is floored at 1e-2 of
+        the channel group's mean std."""
+        a = np.concatenate([np.asarray(f, dtype=np.float64) for f in audio_features])
+        m = np.concatenate([np.asarray(f, dtype=np.float64) for f in motion_features])
+        a_mean, a_std = a.mean(axis=0), a.std(axis=0)
+        a_mean[BEAT_COLUMNS], a_std[BEAT_COLUMNS] = 0.0, 1.0
+        m_mean, m_std = m.mean(axis=0), m.std(axis=0)
+        m_mean[CONTACTS], m_std[CONTACTS] = 0.5, 0.5
+        a_std = np.maximum(a_std, 1e-2 * a_std.mean())
+        m_std = np.maximum(m_std, 1e-2 * m_std.mean())
+        return DanceStats(*(v.astype(np.float32) for v in (a_mean, a_std, m_mean, m_std)))
+
+    def normalize_audio(self, x: np.ndarray) -> np.ndarray:
+        return ((np.asarray(x, np.float32) - self.audio_mean) / self.audio_std).astype(np.float32)
+
+    def normalize_motion(self, x: np.ndarray) -> np.ndarray:
+        return ((np.asarray(x, np.float32) - self.motion_mean) / self.motion_std).astype(np.float32)
+
+    def denormalize_motion(self, z: np.ndarray) -> np.ndarray:
+        return (np.asarray(z, np.float32) * self.motion_std + self.motion_mean).astype(np.float32)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "audio_mean": self.audio_mean,
+            "audio_std": self.audio_std,
+            "motion_mean": self.motion_mean,
+            "motion_std": self.motion_std,
+        }
+
+    def save(self, path: str | Path, **extra: np.ndarray) -> None:
+        """``.npz`` with the four arrays (and ``extra`` ones, e.g. start poses)."""
+        np.savez(path, **self.arrays(), **extra)
+
+    @staticmethod
+    def from_arrays(arrays: dict[str, np.ndarray]) -> DanceStats:
+        stats = DanceStats(
+            *(np.asarray(arrays[k], np.float32) for k in ("audio_mean", "audio_std",
+                                                          "motion_mean", "motion_std"))
+        )  # fmt: skip
+        if stats.audio_mean.shape != (AUDIO_CHANNELS,) or stats.motion_mean.shape != (
+            MOTION_CHANNELS,
+        ):
+            raise MotionError("dance statistics have the wrong number of channels")
+        return stats
+
+    @staticmethod
+    def load(path: str | Path) -> DanceStats:
+        with np.load(path, allow_pickle=False) as z:
+            return DanceStats.from_arrays({k: z[k] for k in z.files})
+
+
+# --------------------------------------------------------------------------- post-processing
+
+
+def smooth_features(x: np.ndarray, cutoff_hz: float = 6.0, order: int = 2) -> np.ndarray:
+    """Zero-phase Butterworth low-pass (``scipy.signal``) of rotation and root channels of raw
+    features ``(F, MOTION_CHANNELS)``; contacts are kept. Short clips are returned as they are."""
+    from scipy.signal import butter, filtfilt
+
+    x = np.asarray(x, dtype=np.float64)
+    b, a = butter(order, cutoff_hz / (0.5 * FPS))
+    pad = 3 * max(len(a), len(b))
+    if len(x) <= pad:
+        return x.astype(np.float32)
+    out = x.copy()
+    out[:, : CONTACTS.start] = filtfilt(b, a, x[:, : CONTACTS.start], axis=0)
+    return out.astype(np.float32)

@@ -1,0 +1,152 @@
+"""``POST /v1/dance`` against the real app with a tiny dance bundle exported here (random
+weights: these tests check the plumbing, timing and errors, not the dancing)."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile
+
+from motion import bvh
+from motion import canonical as C
+from service.config import Settings
+from tests.api.helpers import assert_problem
+from tests.rigs import FIXTURE
+
+torch = pytest.importorskip("torch")
+
+SR = 22050
+
+
+@pytest.fixture(scope="module")
+def models_dir(tmp_path_factory) -> Path:
+    from model_export import dance as ED
+    from motion import dance_features as DF
+    from training import dance as TD
+
+    folder = tmp_path_factory.mktemp("models")
+    (folder / "manifest.json").write_text('{"schema_version": 1, "models": []}')
+    torch.manual_seed(0)
+    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval()
+    rng = np.random.default_rng(0)
+    stats = DF.DanceStats(
+        np.full(DF.AUDIO_CHANNELS, -40.0, np.float32),
+        np.full(DF.AUDIO_CHANNELS, 20.0, np.float32),
+        np.zeros(DF.MOTION_CHANNELS, np.float32),
+        np.full(DF.MOTION_CHANNELS, 0.05, np.float32),
+    )
+    poses = np.zeros((4, DF.MOTION_CHANNELS), np.float32)
+    poses[:, DF.ROTATIONS] = np.tile([1, 0, 0, 0, 1, 0], len(DF.BODY))  # identity rotations
+    poses[:, DF.HEIGHT] = 1.1
+    poses += 0.01 * rng.standard_normal(poses.shape).astype(np.float32)
+    stats = DF.DanceStats(stats.audio_mean, stats.audio_std, poses.mean(0), stats.motion_std)
+    ED.export_bundle(model, stats, poses, folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def client(models_dir):
+    import warnings
+
+    from service.main import create_app
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
+        from fastapi.testclient import TestClient
+
+    app = create_app(Settings(models_dir=models_dir, max_audio_seconds=30.0))
+    with TestClient(app) as c:
+        assert app.state.registry.wait(60)
+        assert app.state.registry.ready, app.state.registry.reasons()
+        yield c
+
+
+def click_wav(seconds: float = 4.0, bpm: float = 120.0, fmt: str = "WAV") -> bytes:
+    t = np.arange(int(seconds * SR)) / SR
+    y = 0.05 * np.sin(2 * np.pi * 220 * t)
+    for c in np.arange(0.25, seconds, 60 / bpm):
+        i = int(c * SR)
+        n = np.arange(min(400, len(y) - i))
+        y[i : i + len(n)] += 0.6 * np.sin(2 * np.pi * 1000 * n / SR) * np.exp(-n / 80)
+    buf = io.BytesIO()
+    soundfile.write(buf, y.astype(np.float32), SR, format=fmt)
+    return buf.getvalue()
+
+
+def post(client, data: bytes, name="song.wav", media="audio/wav", query="", files=None, **form):
+    return client.post(
+        "/v1/dance" + query,
+        files={"audio": (name, data, media), **(files or {})},
+        data={k: str(v) for k, v in form.items()},
+    )
+
+
+def test_dance_lasts_as_long_as_the_audio(client):
+    r = post(client, click_wav(4.0), genre="waltz")
+    assert r.status_code == 200, r.text
+    assert r.headers["content-type"].startswith("text/plain")
+    assert "attachment" in r.headers["content-disposition"]
+    motion = bvh.loads(r.text)
+    assert motion.num_frames == 120 == int(r.headers["x-frames"])
+    assert abs(motion.fps - 30.0) < 1e-3 and r.headers["x-fps"] == "30"
+    assert motion.skeleton.names == C.JOINTS
+    assert np.all(np.isfinite(motion.lrot)) and np.all(np.isfinite(motion.lpos))
+    assert r.headers["x-model-version"].startswith("dance-dwm/")
+
+
+def test_fps_json_and_predicted_genre(client):
+    r = post(client, click_wav(3.1, fmt="FLAC"), name="s.flac", media="audio/flac",
+             query="?format=json", fps=24)  # fmt: skip
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["frames"] == math.ceil(3.1 * 24) and body["fps"] == 24
+    assert any("predicted" in w for w in body["warnings"])
+    assert bvh.loads(body["bvh"]).num_frames == body["frames"]
+    assert {"features", "step_network", "decode"} <= set(body["timings_ms"])
+
+
+def test_seed_gives_variation_and_is_reproducible(client):
+    song = click_wav(2.0)
+    a, b, c = (post(client, song, genre="rumba", seed=s).text for s in (1, 1, 2))
+    assert a == b
+    assert a != c
+
+
+def test_retargets_onto_a_skeleton(client):
+    rig = Path(FIXTURE).read_bytes()
+    r = post(client, click_wav(2.0), files={"skeleton": ("rig.bvh", rig, "text/plain")},
+             genre="cha-cha", fps=60)  # fmt: skip
+    assert r.status_code == 200, r.text
+    out, ref = bvh.loads(r.text), bvh.loads(rig)
+    assert out.skeleton.names == ref.skeleton.names
+    assert out.num_frames == 120 and abs(out.fps - 60) < 1e-3
+    # the skeleton may also come as a text field; "auto" asks for the predicted genre
+    r = post(client, click_wav(1.0), skeleton=rig.decode(), genre="auto", query="?format=json")
+    assert r.status_code == 200, r.text
+    assert bvh.loads(r.json()["bvh"]).skeleton.names == ref.skeleton.names
+    assert any("predicted" in w for w in r.json()["warnings"])
+
+
+def test_errors_are_problems(client):
+    body = assert_problem(post(client, click_wav(1.0), genre="polka"), 400, "invalid-request")
+    assert "waltz" in body["genres"]
+    silent = io.BytesIO()
+    soundfile.write(silent, np.zeros(SR, np.float32), SR, format="WAV")
+    assert_problem(post(client, silent.getvalue()), 422, "unusable-input")
+    assert_problem(post(client, b"not audio at all" * 10), 400, "invalid-input")
+    assert_problem(post(client, b"HIERARCHY", media="text/plain"), 415)
+    assert_problem(post(client, click_wav(31.0)), 413, "too-large")
+    assert_problem(post(client, b""), 400)
+
+
+def test_styles_lists_dance_genres(client):
+    styles = client.get("/v1/styles").json()["dance"]
+    assert {s["name"] for s in styles} >= {"waltz", "rumba", "cha-cha", "tango"}
+    manifest = client.get("/v1/models").json()
+    text = json.dumps(manifest)
+    assert "dance-dwm" in text

@@ -1,0 +1,182 @@
+"""The dance encodings (motion.dance_features), network, losses and ONNX export."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motion import audio, retarget
+from motion import dance_features as DF
+from motion import kinematics as K
+from motion.errors import MotionError
+from tests.rigs import load_fixture
+
+
+@pytest.fixture(scope="module")
+def walk():
+    m = load_fixture()
+    return retarget.to_canonical(m, retarget.make_rig(m.skeleton, m))
+
+
+def test_encode_decode_round_trip(walk):
+    enc = DF.encode(walk)
+    assert enc.features.shape == (walk.num_frames, DF.MOTION_CHANNELS)
+    assert enc.features.dtype == np.float32
+    motion, contacts = DF.decode(enc.features, enc.start, enc.heading)
+    a, b = K.global_positions(walk), K.global_positions(motion)
+    assert np.abs(a - b).max() < 0.05  # cm, float32 features
+    assert contacts.shape == (walk.num_frames, 4) and contacts.any()
+    with pytest.raises(MotionError):
+        DF.decode(enc.features[:, :10])
+
+
+def test_encoding_ignores_heading_and_place(walk):
+    from motion import rotations as rot
+
+    turn = rot.about_y(np.array(1.0))
+    lrot, lpos = walk.lrot.copy(), walk.lpos.copy()
+    lrot[:, 1] = rot.mul(turn, lrot[:, 1])
+    lpos[:, 1] = rot.apply(turn, lpos[:, 1]) + [100.0, 0.0, -50.0]
+    moved = DF.encode(walk.replace(lrot=lrot, lpos=lpos)).features
+    np.testing.assert_allclose(moved, DF.encode(walk).features, atol=2e-4)
+
+
+def test_song_features_use_the_song_beats():
+    sr = 22050
+    y = (0.1 * np.sin(2 * np.pi * 440 * np.arange(3 * sr) / sr)).astype(np.float32)
+    beats = np.arange(0.0, 10.0, 0.5)
+    x = DF.song_features(y, sr, 45, offset=1.25, beats=beats, tempo=120.0)
+    assert x.shape == (45, DF.AUDIO_CHANNELS)
+    # frame 0 sits at song time 1.25 s: half way between beats; frame 6 at 1.45 s: phase 0.9
+    np.testing.assert_allclose(x[0, DF.BEAT_COLUMNS], [0.0, -1.0], atol=1e-5)
+    angle = 2 * np.pi * 0.9
+    np.testing.assert_allclose(x[6, DF.BEAT_COLUMNS], [np.sin(angle), np.cos(angle)], atol=1e-5)
+    # before the song: silence at the floor, and no crash
+    early = DF.song_features(y, sr, 10, offset=-2.0)
+    assert np.all(early[:, : audio.N_MELS] <= audio.DB_FLOOR + 1e-3)
+    assert np.all(DF.drop_beats(x)[:, DF.BEAT_COLUMNS] == 0)
+
+
+def test_stats_round_trip(tmp_path, walk):
+    m = DF.encode(walk).features
+    a = np.random.default_rng(0).normal(size=(len(m), DF.AUDIO_CHANNELS)).astype(np.float32)
+    stats = DF.DanceStats.fit([a], [m])
+    assert np.all(stats.audio_mean[DF.BEAT_COLUMNS] == 0) and np.all(
+        stats.audio_std[DF.BEAT_COLUMNS] == 1
+    )
+    z = stats.normalize_motion(m)
+    assert np.all(np.abs(z[:, DF.CONTACTS]) == 1)
+    np.testing.assert_allclose(stats.denormalize_motion(z), m, atol=1e-5)
+    stats.save(tmp_path / "s.npz", start_poses=m[:3])
+    again = DF.DanceStats.load(tmp_path / "s.npz")
+    np.testing.assert_array_equal(again.motion_std, stats.motion_std)
+
+
+def test_smoothing_keeps_contacts(walk):
+    x = DF.encode(walk).features
+    noisy = x + np.random.default_rng(0).normal(0, 0.05, x.shape).astype(np.float32)
+    smooth = DF.smooth_features(noisy)
+    np.testing.assert_array_equal(smooth[:, DF.CONTACTS], noisy[:, DF.CONTACTS])
+    assert (
+        np.abs(np.diff(smooth[:, : DF.HEIGHT], axis=0)).mean()
+        < np.abs(np.diff(noisy[:, : DF.HEIGHT], axis=0)).mean()
+    )
+
+
+def test_genres():
+    assert DF.genre_vector("waltz")[DF.genre_index("waltz")] == 1
+    v = DF.genre_vector(probabilities=[0.1, 0.2, 0.3, 0.4])
+    assert v.sum() == pytest.approx(1.0) and v[4:].sum() == 0
+    with pytest.raises(MotionError):
+        DF.genre_index("polka")
+
+
+# --------------------------------------------------------------------------- torch
+
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """Tiny networks: more threads only contend (the suite may share the cores)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def _stats(walk):
+    m = DF.encode(walk).features
+    a = np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32)
+    return DF.DanceStats.fit([a + np.random.default_rng(0).normal(size=a.shape)], [m]), m
+
+
+def test_torch_fk_matches_numpy(walk):
+    from motion import rotations as rot
+    from training import dance as TD
+
+    stats, m = _stats(walk)
+    losses = TD.Losses(stats)
+    _, pos = losses.kinematics(torch.from_numpy(m))
+    # numpy: root-local body positions in leg lengths (facing frame, root on the floor)
+    grot, gpos = K.fk(walk.lrot, walk.lpos, walk.skeleton.parents)
+    face = K.facing_rotations(K.facing_directions(gpos, *DF.FACING_JOINTS, smooth=2.0))
+    local = K.root_local(gpos[:, DF.BODY], gpos[:, DF.HIPS], face) / DF.LEG
+    np.testing.assert_allclose(pos.numpy(), local, atol=1e-4)
+    assert rot  # noqa: B018
+
+
+def test_rollout_losses_and_a_few_steps_learn(walk):
+    from training import dance as TD
+
+    torch.manual_seed(0)
+    stats, m = _stats(walk)
+    seq = TD.Sequence("walk", 3, np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32), m, True, True)
+    sampler = TD.WindowSampler([seq], stats, 24, 0.0, seed=0)
+    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32))
+    losses = TD.Losses(stats)
+    args = TD.parse_args(["--window", "24", "--cond-ramp", "5", "--predicted-genre", "0.5"])
+    rng = np.random.default_rng(0)
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    first = None
+    for step in range(25):
+        parts = TD.train_step(model, losses, sampler.batch(4), args, rng, step, TD.WEIGHTS)
+        assert all(torch.isfinite(v) for v in parts.values())
+        first = first if first is not None else float(parts["total"].detach())
+        opt.zero_grad()
+        parts["total"].backward()
+        opt.step()
+    assert float(parts["total"].detach()) < first
+    raw = TD.generate(model, stats, seq.audio[:40], DF.genre_vector("waltz"), m[0])
+    assert raw.shape == (40, DF.MOTION_CHANNELS) and np.all(np.isfinite(raw))
+
+
+def test_ac_mask_alternates():
+    from training import dance as TD
+
+    mask = TD.ac_mask(30, gt=5, cond=10, rng=np.random.default_rng(0)).numpy()
+    assert mask.sum() == 10
+    runs = np.diff(np.flatnonzero(np.diff(mask.astype(int)) != 0))
+    assert set(runs) <= {5, 10}
+
+
+def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk):
+    from model_export import dance as ED
+    from training import dance as TD
+
+    torch.manual_seed(0)
+    model = TD.DanceNet(TD.Config(hidden=48, code=16, audio_hidden=32)).eval()
+    (tmp_path / "manifest.json").write_text('{"schema_version": 1, "models": []}')
+    stats, m = _stats(walk)
+    entry = ED.export_bundle(model, stats, m[:4], tmp_path)
+    checks = entry["metrics"]["parity_max_abs"]
+    assert checks["steps"] == 100 and checks["step"] < 1e-4 and checks["audio"] < 1e-4
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(tmp_path / "dance" / "step.onnx"))
+    shapes = {i.name: i.shape for i in session.get_inputs()}
+    assert shapes["h1"] == ["batch", 48] and shapes["prev"] == ["batch", DF.MOTION_CHANNELS]
+    # dynamic batch: three sequences at once
+    feeds = {i.name: np.zeros([3 if d == "batch" else d for d in i.shape], np.float32)
+             for i in session.get_inputs()}  # fmt: skip
+    assert session.run(None, feeds)[0].shape == (3, DF.MOTION_CHANNELS)
