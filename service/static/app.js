@@ -3,7 +3,8 @@
 //
 // It works before any model is served: the input clip is parsed and animated in the browser,
 // and when a POST fails the problem+json detail is shown. Tests read window.motionPreview:
-// {webgl, styles, input: {loaded, frames, fps, frame, ticks}, result: {...}, lastMessage}.
+// {webgl, styles, input: {loaded, frames, fps, frame, ticks}, result: {...}, download: {name,
+// text}, lastMessage}.
 
 import * as THREE from './vendor/three/three.module.min.js';
 import { BVHLoader } from './vendor/three/BVHLoader.js';
@@ -378,6 +379,8 @@ async function run(event) {
   }
   const button = $('run');
   button.disabled = true;
+  $('download').hidden = true;  // an earlier result must not pass for this run's
+  state.download = null;
   say(`Running ${request.url}...`);
   try {
     const response = await fetch(request.url, {
@@ -394,6 +397,7 @@ async function run(event) {
     resultView.show(parseBvh(text), name);
     if (downloadUrl) URL.revokeObjectURL(downloadUrl);
     downloadUrl = URL.createObjectURL(new Blob([text], { type: 'text/plain' }));
+    state.download = { name, text };  // what the download button saves (read by tests)
     const link = $('download');
     link.href = downloadUrl;
     link.download = name;

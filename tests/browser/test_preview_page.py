@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from motion import bvh
 from tests.server import REPO, ServerProcess
 
 FIXTURE = REPO / "tests" / "data" / "cmu_02_01_walk_30fps.bvh"
@@ -89,7 +90,7 @@ def console_errors(driver, *, allow_network: bool = False) -> list[dict]:
     ]
 
 
-def test_page_animates_an_uploaded_clip_and_reports_problems(server, browser):
+def test_page_animates_an_uploaded_clip_and_reports_problems(server, browser, tmp_path):
     from selenium.webdriver.common.by import By
 
     browser.get(server.url + "/")
@@ -118,19 +119,47 @@ def test_page_animates_an_uploaded_clip_and_reports_problems(server, browser):
         assert shots[0] != shots[1], "the canvas did not change between two screenshots"
     assert console_errors(browser) == []
 
-    # Run: there is no model endpoint to serve it yet (or the input is refused): the page
-    # shows the problem's title, status, detail and request id, and offers no download.
+    # Run with the selected style: the shipped model answers, the result animates beside
+    # the input, and the download is a valid BVH on the input's own skeleton.
+    browser.find_element(By.ID, "run").click()
+    wait_for(browser, "window.motionPreview.result.loaded", timeout=90)
+    result = browser.execute_script("return window.motionPreview.result")
+    assert result["frames"] >= 2 and result["fps"] == 30
+    seen = set()
+    deadline = time.monotonic() + 3.0
+    while time.monotonic() < deadline and len(seen) < 5:
+        seen.add(browser.execute_script("return window.motionPreview.result.frame"))
+        time.sleep(0.1)
+    assert len(seen) >= 5, f"the result did not animate: {seen}"
+    link = browser.find_element(By.ID, "download")
+    assert link.get_attribute("hidden") is None
+    assert link.get_attribute("href").startswith("blob:")
+    saved = browser.execute_script("return window.motionPreview.download")
+    assert saved["name"].endswith(".bvh") and link.get_attribute("download") == saved["name"]
+    out = bvh.loads(saved["text"])
+    assert out.skeleton.names == bvh.load(FIXTURE).skeleton.names
+    assert console_errors(browser) == []
+
+    # A skeleton the service cannot map: the page shows the problem's title, status,
+    # detail and request id, offers no download, and the input keeps playing.
+    names = bvh.load(FIXTURE).skeleton.names
+    odd = FIXTURE.read_text()
+    for i, name in sorted(enumerate(names), key=lambda p: -len(p[1])):
+        odd = re.sub(rf"\b(ROOT|JOINT) {re.escape(name)}\b", rf"\1 bone{i}", odd)
+    odd_path = tmp_path / "not_humanoid.bvh"
+    odd_path.write_text(odd)
+    browser.find_element(By.ID, "content-file").send_keys(str(odd_path))
+    wait_for(browser, "window.motionPreview.input.loaded")
     browser.find_element(By.ID, "run").click()
     message = wait_for(
         browser,
         "document.querySelector('#message.error') && "
         "document.querySelector('#message').textContent",
+        timeout=60,
     )
     assert re.search(r"failed: .+ \(4\d\d\) - .+ - request id [0-9a-f]{32}", message), message
     assert browser.find_element(By.ID, "download").get_attribute("hidden") is not None
-    # the failed POST itself is the only error the browser may log
     assert console_errors(browser, allow_network=True) == []
-    # and the input keeps playing
     before = browser.execute_script("return window.motionPreview.input.ticks")
     time.sleep(0.3)
     assert browser.execute_script("return window.motionPreview.input.ticks") > before
