@@ -88,3 +88,14 @@ export-dance: $(VENV)/.dev
 
 eval-dance: $(VENV)/.dev
 	$(PY) -m training.dance --eval
+
+# aberman2020 translator: ONNX graphs, statistics, style table and the manifest entry
+# "translator-bandai" from a copy of checkpoints/translator.pt (the training overwrites it).
+# Extra flags: EXPORT_TRANSLATOR_ARGS="--checkpoint other.pt".
+EXPORT_TRANSLATOR_ARGS ?=
+.PHONY: export-translator eval-translator
+export-translator: $(VENV)/.dev
+	$(PY) -m model_export.translator $(EXPORT_TRANSLATOR_ARGS)
+
+eval-translator: $(VENV)/.dev
+	@echo "eval-translator: not written yet (held-out takes: models/translator/split.json)"; exit 1

@@ -19,7 +19,7 @@ from service.errors import install_error_handlers
 from service.inference import InferenceRunner
 from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
 from service.registry import ModelRegistry
-from service.routes import dance, debug, health, models, styles, stylize
+from service.routes import dance, debug, health, models, styles, stylize, transfer
 from service.routes import metrics as metrics_routes
 from service.routes.preview import install_preview
 
@@ -80,6 +80,7 @@ def create_app(
         app.include_router(router)
     app.include_router(stylize.router)
     app.include_router(dance.router)
+    app.include_router(transfer.router)
     if settings.debug_routes:
         app.include_router(debug.router)
     install_preview(app)

@@ -35,6 +35,7 @@ ENGINE_FACTORIES: dict[str, EngineFactory] = {}
 FAMILY_MODULES: tuple[str, ...] = (
     "service.engines.fast",
     "service.engines.dance",
+    "service.engines.translator",
 )
 
 

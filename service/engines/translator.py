@@ -1,0 +1,277 @@
+"""The translator family (aberman2020): content clip + a style code from an example clip, a
+video's 2D keypoints, a style name or a mix of names; numpy and onnxruntime only.
+
+Graphs (``model_export/translator.py``): ``content_encoder``, ``style3d``, ``style2d`` and
+``decoder``, all ``(batch, channels, time)``. Every clip is padded in time to a length
+bucket (a multiple of ``BUCKET`` frames, never shorter than the networks' receptive field)
+by mirroring it at both ends, so onnxruntime sees few shapes, short clips are padded rather
+than refused, and the instance norms see statistics close to the clip's own (measured on
+Bandai clips: mirroring keeps the output closer to what the clip gives inside a longer take
+than repeating the last frame).
+
+A transfer (paper section 3.4): encode the content; style code = own + strength x (target -
+own), own being the content's 3D style code (strength 0 gives the content back, as the
+network reconstructs it); decode; the content's root trajectory (``features.decode_motion``);
+feet pinned where the CONTENT's feet are planted (``ik.pin_canonical_feet``, before the time
+warp, as the paper does); then the time warp by the ratio of velocity factors (style over
+content, to the power ``strength``), clamped to [``MIN_WARP``, ``MAX_WARP``].
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from motion import contacts as CT
+from motion import features as Fe
+from motion import ik
+from motion import kinematics as K
+from motion.keypoints import Keypoints2D
+from motion.skeleton import Motion
+from service.engines import register_engine
+from service.engines.base import Engine
+from service.errors import NotFound, ServiceError
+from service.metrics import StageTimer
+
+BUCKET = 64  # frames: padded lengths are multiples of this
+MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
+NEAREST = 5  # named styles listed by nearest()
+
+
+class InvalidStyle(ServiceError):
+    """A style field that is present but malformed (400 invalid-request)."""
+
+    def __init__(self, detail: str, **ext: Any) -> None:
+        super().__init__(400, "Invalid request", detail, slug="invalid-request", **ext)
+
+
+@dataclass
+class StyleCode:
+    """A style code ``(S,)`` float32, the velocity factor of its source (None when unknown,
+    e.g. a video: no time warp), what it came from, and warnings for the client."""
+
+    code: np.ndarray
+    velocity: float | None
+    source: str
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Transfer:
+    """A transfer's canonical result (30 fps, after clean-up and warp), the time-warp factor
+    applied to it (the caller warps the original clip by the same factor) and warnings."""
+
+    motion: Motion
+    warp: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def padded_length(frames: int, minimum: int = BUCKET) -> int:
+    """The bucket a clip of ``frames`` frames runs at: a multiple of ``BUCKET``, >= ``minimum``."""
+    return max(-(-frames // BUCKET) * BUCKET, -(-minimum // BUCKET) * BUCKET)
+
+
+def pad_mirrored(x: np.ndarray, total: int) -> tuple[np.ndarray, int]:
+    """``x (F, C)`` mirrored at both ends to ``total`` frames; returns it and the offset of
+    frame 0 (crop ``[offset : offset + F]``)."""
+    extra = total - len(x)
+    before = extra // 2
+    return np.pad(x, ((before, extra - before), (0, 0)), mode="symmetric"), before
+
+
+def velocity_factor(enc: Fe.Encoded, fps: float = Fe.FPS) -> float:
+    """``motion.features.velocity_factor`` from an encoding already made (no second FK)."""
+    local = enc.style3d.reshape(len(enc.style3d), -1, 3).astype(np.float64) * Fe.LEG
+    speed = np.linalg.norm(K.velocities(local, fps), axis=-1)
+    return float(speed.max(axis=-1).mean())
+
+
+def parse_mix(text: str) -> dict[str, float]:
+    """The ``style_mix`` field: a JSON object name -> weight, weights finite and >= 0 with a
+    positive sum; 400 otherwise. Weights are returned as given (normalised later)."""
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
+        raise InvalidStyle(f"'style_mix' is not JSON: {exc}", field="style_mix") from None
+    if not isinstance(value, dict) or not value:
+        raise InvalidStyle(
+            "'style_mix' must be a non-empty JSON object of style name -> weight",
+            field="style_mix",
+        )
+    mix: dict[str, float] = {}
+    for name, weight in value.items():
+        number = isinstance(weight, int | float) and not isinstance(weight, bool)
+        if not number or not math.isfinite(weight) or weight < 0:
+            raise InvalidStyle(
+                f"'style_mix' weight of {name!r} must be a finite number >= 0, got {weight!r}",
+                field="style_mix",
+            )
+        mix[name] = float(weight)
+    if sum(mix.values()) <= 0:
+        raise InvalidStyle("'style_mix' weights must have a positive sum", field="style_mix")
+    return mix
+
+
+class TranslatorEngine(Engine):
+    family: ClassVar[str] = "translator"
+    warm_dims: ClassVar[dict[str, int]] = {"batch": 1, "time": 2 * BUCKET, "code_time": BUCKET}
+
+    def load_assets(self) -> None:
+        extra = self.entry.extra
+        arrays = self.load_npz(extra["stats"])
+        kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
+        self.stats = Fe.FeatureStats(
+            {k: arrays[f"{k}_mean"] for k in kinds}, {k: arrays[f"{k}_std"] for k in kinds}
+        )
+        table = self.load_npz(extra["styles_file"])
+        self.style_names = [str(n) for n in table["names"]]
+        self.codes = np.asarray(table["codes"], dtype=np.float32)
+        self.clips = [int(c) for c in table["clips"]]
+        self.velocity = [float(v) for v in table["velocity"]]
+        self.index = {name: i for i, name in enumerate(self.style_names)}
+        self.style_dim = int(self.codes.shape[1])
+        self.min_frames = padded_length(1, int(extra.get("receptive_field", BUCKET)))
+        declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
+        if declared != self.style_dim:
+            raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
+
+    def styles(self) -> list[dict[str, Any]]:
+        return [
+            {"name": name, "clips": self.clips[i], "velocity_factor": round(self.velocity[i], 4)}
+            for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
+        ]
+
+    # --- networks --------------------------------------------------------------------------
+
+    def _padded(self, x: np.ndarray) -> tuple[np.ndarray, int]:
+        """``x (F, C)`` standardised -> ``(1, C, T)`` float32 at its bucket, and the offset."""
+        padded, offset = pad_mirrored(x, padded_length(len(x), self.min_frames))
+        return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
+
+    def _style_net(self, graph: str, kind: str, features: np.ndarray) -> np.ndarray:
+        x, _ = self._padded(Fe.standardize(features, self.stats, kind))
+        name = self.sessions[graph].get_inputs()[0].name
+        return self.run(graph, {name: x})[0][0]
+
+    # --- style codes -----------------------------------------------------------------------
+
+    def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
+        """The 3D style code and velocity factor of a canonical clip at 30 fps."""
+        timer = timer or StageTimer(self.name)
+        with timer.stage("style_features"):
+            enc = Fe.encode(canon)
+            velocity = velocity_factor(enc, canon.fps)
+        with timer.stage("style_encode"):
+            code = self._style_net("style3d", "style3d", enc.style3d)
+        return StyleCode(code, velocity, "style")
+
+    def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
+        """The 2D style code of a video's keypoints (resampled to 30 fps); no velocity
+        factor (a video's joint speeds are in image units), so no time warp."""
+        timer = timer or StageTimer(self.name)
+        with timer.stage("style_features"):
+            features = Fe.style2d_from_keypoints(kp)
+        with timer.stage("style_encode"):
+            code = self._style_net("style2d", "style2d", features)
+        return StyleCode(code, None, "keypoints")
+
+    def require_style(self, name: str) -> int:
+        """The table row of style ``name``; 404 problem listing the known styles if none."""
+        if name not in self.index:
+            raise NotFound(
+                f"no translator style named {name!r}",
+                styles=sorted(self.style_names),
+                model=self.name,
+            )
+        return self.index[name]
+
+    def code_of_name(self, name: str) -> StyleCode:
+        i = self.require_style(name)
+        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name")
+
+    def code_of_mix(self, mix: dict[str, float]) -> StyleCode:
+        """Weighted mean of named codes (and of their velocity factors); weights >= 0 with a
+        positive sum, normalised here; unknown names 404."""
+        rows = [self.require_style(name) for name in mix]
+        weights = np.array(list(mix.values()), dtype=np.float64)
+        if not np.all(np.isfinite(weights)) or (weights < 0).any() or weights.sum() <= 0:
+            raise InvalidStyle("'style_mix' weights must be >= 0 with a positive sum")
+        weights /= weights.sum()
+        code = (weights[:, None] * self.codes[rows].astype(np.float64)).sum(axis=0)
+        velocity = float(np.dot(weights, [self.velocity[i] for i in rows]))
+        return StyleCode(code.astype(np.float32), velocity, "style_mix")
+
+    def nearest(self, code: np.ndarray, count: int = NEAREST) -> list[dict[str, Any]]:
+        """The ``count`` named styles nearest to ``code`` (Euclidean), nearest first."""
+        distances = np.linalg.norm(self.codes - np.asarray(code, dtype=np.float32), axis=1)
+        order = np.argsort(distances, kind="stable")[:count]
+        return [
+            {"style": self.style_names[i], "distance": round(float(distances[i]), 4)} for i in order
+        ]
+
+    # --- transfer --------------------------------------------------------------------------
+
+    def warp_factor(
+        self, style_velocity: float | None, content_velocity: float, strength: float
+    ) -> tuple[float, list[str]]:
+        """``(style / content) ** strength`` clamped to [MIN_WARP, MAX_WARP], and warnings."""
+        if style_velocity is None:
+            return 1.0, ["the style has no velocity factor (2D keypoints): no time warp"]
+        if not (style_velocity > 1e-6 and content_velocity > 1e-6):
+            return 1.0, ["a clip hardly moves (velocity factor ~0): no time warp"]
+        factor = (style_velocity / content_velocity) ** strength
+        clamped = min(max(factor, MIN_WARP), MAX_WARP)
+        if clamped != factor:
+            return clamped, [
+                f"time warp factor {factor:.3f} clamped to {clamped:g} "
+                f"(allowed {MIN_WARP:g} to {MAX_WARP:g})"
+            ]
+        return factor, []
+
+    def transfer(
+        self,
+        content: Motion,
+        code: np.ndarray,
+        strength: float = 1.0,
+        time_warp: bool = True,
+        foot_cleanup: bool = True,
+        style_velocity: float | None = None,
+        timer: StageTimer | None = None,
+    ) -> Transfer:
+        """``content`` (canonical, 30 fps) in the style of ``code ``(S,)``; see the module
+        docstring. ``style_velocity`` None means no time warp (with a warning if asked)."""
+        timer = timer or StageTimer(self.name)
+        frames = content.num_frames
+        with timer.stage("features"):
+            enc = Fe.encode(content)
+            x_content, offset = self._padded(Fe.standardize(enc.content, self.stats, "content"))
+            x_style, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
+        with timer.stage("encode"):
+            latent = self.run("content_encoder", {"content": x_content})[0]
+            own = self.run("style3d", {"motion3d": x_style})[0][0]
+        target = np.asarray(code, dtype=np.float32).reshape(own.shape)
+        mixed = own + np.float32(strength) * (target - own)
+        with timer.stage("decode"):
+            out = self.run("decoder", {"code": latent, "style_code": mixed[None]})[0]
+        with timer.stage("rotations"):
+            output = Fe.unstandardize(out[0].T[offset : offset + frames], self.stats, "output")
+            motion = Fe.decode_motion(output, content, face=enc.facing)
+        if foot_cleanup:
+            with timer.stage("foot_cleanup"):
+                motion = ik.pin_canonical_feet(motion, CT.canonical_foot_contacts(content))
+        warnings: list[str] = []
+        factor = 1.0
+        if time_warp:
+            with timer.stage("time_warp"):
+                content_velocity = velocity_factor(enc, content.fps)
+                factor, warnings = self.warp_factor(style_velocity, content_velocity, strength)
+                if factor != 1.0:
+                    motion = Fe.time_warp(motion, factor)
+        return Transfer(motion, factor, warnings)
+
+
+register_engine("translator", TranslatorEngine)

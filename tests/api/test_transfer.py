@@ -1,0 +1,389 @@
+"""``POST /v1/transfer``, ``POST /v1/style-code`` and the translator's ``GET /v1/styles``,
+against the real app and the SHIPPED translator (``models/translator``)."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import bvh, retarget
+from motion import features as Fe
+from service.config import Settings
+from service.engines.translator import (
+    BUCKET,
+    MAX_WARP,
+    MIN_WARP,
+    InvalidStyle,
+    pad_mirrored,
+    padded_length,
+    parse_mix,
+    velocity_factor,
+)
+from tests.api.helpers import assert_problem
+from tests.conftest import data_path
+from tests.rigs import FIXTURE
+
+
+def shipped_translator() -> dict | None:
+    models_dir = Settings().models_dir
+    if not (models_dir / "translator").exists():
+        return None
+    try:
+        doc = json.loads((models_dir / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return next((m for m in doc.get("models", []) if m.get("family") == "translator"), None)
+
+
+ENTRY = shipped_translator()
+STYLES = sorted(ENTRY["extra"]["styles"]) if ENTRY else []
+needs_model = pytest.mark.skipif(ENTRY is None, reason="no translator shipped in models/translator")
+UNMAPPABLE = (
+    b"HIERARCHY\nROOT Pelvis\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition"
+    b" Zrotation Xrotation Yrotation\n JOINT Tail\n {\n  OFFSET 0 -10 0\n  CHANNELS 3"
+    b" Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -5 0\n  }\n }\n}\n"
+    b"MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 0 0 0 0 0 0 0 0\n0 0 0 0 0 0 0 0 0\n"
+)
+
+
+def bandai(name: str) -> bytes:
+    return data_path("bandai", "dataset-1", f"{name}.bvh").read_bytes()
+
+
+@pytest.fixture(scope="module")
+def walk() -> bytes:
+    return Path(FIXTURE).read_bytes()
+
+
+@pytest.fixture(scope="module")
+def treadmill_zip() -> bytes:
+    """The OpenPose JSON files of a real treadmill video (23.976 fps), zipped."""
+    folder = data_path("keypoints", "openpose-treadmill-27")
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as archive:
+        for path in sorted(folder.glob("*.json")):
+            archive.write(path, path.name)
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def shared_client():
+    """One app for the module (the four graphs load and warm once)."""
+    import warnings
+
+    from service.main import create_app
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
+        from fastapi.testclient import TestClient
+
+    app = create_app()
+    with TestClient(app) as client:
+        assert app.state.registry.wait(120)
+        yield client
+
+
+def transfer(client, content: bytes, query: str = "", files=None, **fields):
+    parts = {"content": ("content.bvh", content, "text/plain"), **(files or {})}
+    return client.post("/v1/transfer" + query, files=parts, data=fields)
+
+
+def assert_same_rig(result_text: str, source: bytes, frames: int | None = None):
+    """A BVH on the source's skeleton (names, channels, offsets) and frame rate; the frame
+    count ``frames`` when given. Returns the parsed result."""
+    a, b = bvh.loads(source), bvh.loads(result_text)
+    assert b.skeleton.names == a.skeleton.names
+    assert b.skeleton.channels == a.skeleton.channels
+    np.testing.assert_allclose(b.skeleton.offsets, a.skeleton.offsets, atol=1e-4)
+    assert abs(b.fps - a.fps) < 1e-3
+    assert np.all(np.isfinite(b.lrot)) and np.all(np.isfinite(b.lpos))
+    if frames is not None:
+        assert b.num_frames == frames
+    return b
+
+
+def assert_transfer_ok(response, source: bytes, frames: int | None = None):
+    assert response.status_code == 200, response.text
+    assert response.headers["content-type"] == "text/plain; charset=utf-8"
+    out = assert_same_rig(response.text, source, frames)
+    assert response.headers["x-frames"] == str(out.num_frames)
+    assert float(response.headers["x-fps"]) == pytest.approx(bvh.loads(source).fps, rel=1e-4)
+    assert response.headers["x-model-version"] == f"{ENTRY['name']}/{ENTRY['version']}"
+    return out
+
+
+def expected_warp(content: bytes, style_velocity: float) -> float:
+    canon = retarget.to_canonical(bvh.loads(content))
+    factor = style_velocity / Fe.velocity_factor(canon)
+    return min(max(factor, MIN_WARP), MAX_WARP)
+
+
+# --------------------------------------------------------------------------- engine helpers
+
+
+def test_padding_buckets_and_mirroring():
+    assert padded_length(1, 65) == 2 * BUCKET
+    assert padded_length(60, 65) == 2 * BUCKET and padded_length(129, 65) == 3 * BUCKET
+    assert padded_length(3 * BUCKET, 65) == 3 * BUCKET
+    x = np.arange(10, dtype=np.float32)[:, None]
+    padded, offset = pad_mirrored(x, 64)
+    assert padded.shape == (64, 1)
+    np.testing.assert_array_equal(padded[offset : offset + 10], x)
+    short, offset = pad_mirrored(x[:3], 128)  # far shorter than the pad: still mirrored
+    assert short.shape == (128, 1) and set(short[:, 0]) == {0.0, 1.0, 2.0}
+    np.testing.assert_array_equal(short[offset : offset + 3], x[:3])
+
+
+def test_velocity_factor_from_an_encoding_is_the_features_one(walk):
+    canon = retarget.to_canonical(bvh.loads(walk))
+    assert velocity_factor(Fe.encode(canon)) == pytest.approx(Fe.velocity_factor(canon), 1e-12)
+
+
+def test_parse_mix():
+    assert parse_mix('{"happy": 2, "old": 0}') == {"happy": 2.0, "old": 0.0}
+    for bad in ("{not json", "[1]", "{}", '{"a": -1}', '{"a": "x"}', '{"a": true}',
+                '{"a": 0, "b": 0}', '{"a": NaN}', '{"a": 1e999}'):  # fmt: skip
+        with pytest.raises(InvalidStyle):
+            parse_mix(bad)
+
+
+# --------------------------------------------------------------------------- transfers
+
+
+@needs_model
+def test_styles_are_listed(shared_client):
+    body = shared_client.get("/v1/styles").json()
+    listed = {s["name"]: s for s in body["translator"]}
+    assert sorted(listed) == STYLES
+    for name, info in listed.items():
+        assert info["clips"] == ENTRY["extra"]["styles"][name]["clips"] > 0
+        assert info["model"] == ENTRY["name"]
+
+
+@needs_model
+def test_bandai_content_with_a_bandai_style_clip(shared_client):
+    content = bandai("dataset-1_walk-right_masculinity_001")
+    style = bandai("dataset-1_run_tired_001")
+    response = transfer(shared_client, content, files={"style": ("s.bvh", style, "text/plain")})
+    out = assert_transfer_ok(response, content)
+    style_velocity = Fe.velocity_factor(retarget.to_canonical(bvh.loads(style)))
+    factor = expected_warp(content, style_velocity)
+    assert out.num_frames == round((bvh.loads(content).num_frames - 1) / factor) + 1
+    assert "style_parse" in response.headers["server-timing"]
+
+
+@needs_model
+def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(shared_client, walk):
+    source = bvh.loads(walk)
+    name = "old" if "old" in STYLES else STYLES[0]
+    out = assert_transfer_ok(transfer(shared_client, walk, style_name=name), walk)
+    factor = expected_warp(walk, ENTRY["extra"]["styles"][name]["velocity_factor"])
+    assert out.num_frames == round((source.num_frames - 1) / factor) + 1
+    # joints with no canonical counterpart follow the warped original
+    rig = retarget.make_rig(source.skeleton, source)
+    unmapped = [source.skeleton.index(n) for n in rig.unmapped]
+    assert unmapped
+    warped = Fe.time_warp(source, factor, out.num_frames)
+    dots = np.abs(np.sum(out.lrot[:, unmapped] * warped.lrot[:, unmapped], axis=-1))
+    assert dots.min() > 1 - 1e-5
+
+
+@needs_model
+def test_without_time_warp_the_frame_count_is_the_contents(shared_client, walk):
+    response = transfer(shared_client, walk, style_name=STYLES[0], time_warp="false")
+    assert_transfer_ok(response, walk, frames=bvh.loads(walk).num_frames)
+
+
+@needs_model
+def test_keypoints_of_a_real_video(shared_client, walk, treadmill_zip):
+    response = transfer(
+        shared_client,
+        walk,
+        query="?format=json",
+        files={"keypoints": ("treadmill.zip", treadmill_zip, "application/zip")},
+        keypoints_fps="23.976",
+    )
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert_same_rig(body["bvh"], walk, frames=bvh.loads(walk).num_frames)  # no warp
+    assert any("no time warp" in w for w in body["warnings"])
+
+
+@needs_model
+def test_style_mix_and_json_format(shared_client, walk):
+    mix = json.dumps({STYLES[0]: 0.7, STYLES[-1]: 0.3})
+    response = transfer(shared_client, walk, query="?format=json", style_mix=mix)
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert set(body) == {"bvh", "frames", "fps", "model", "timings_ms", "warnings"}
+    assert body["model"] == {"name": ENTRY["name"], "version": ENTRY["version"]}
+    for stage in ("encode", "decode", "foot_cleanup", "retarget_back", "write"):
+        assert stage in body["timings_ms"], stage
+    out = assert_same_rig(body["bvh"], walk)
+    assert out.num_frames == body["frames"] == int(response.headers["x-frames"])
+
+
+@needs_model
+def test_strength_zero_ignores_the_style(shared_client, walk):
+    """At strength 0 the code is the content's own: any two styles give the same clip."""
+    a = transfer(shared_client, walk, style_name=STYLES[0], strength="0", time_warp="false")
+    b = transfer(shared_client, walk, style_name=STYLES[-1], strength="0", time_warp="false")
+    c = transfer(shared_client, walk, style_name=STYLES[-1], time_warp="false")
+    for r in (a, b, c):
+        assert r.status_code == 200, r.text
+    assert a.text == b.text
+    assert a.text != c.text
+
+
+@needs_model
+def test_short_clip_is_padded_not_refused(shared_client, walk):
+    source = bvh.dumps(bvh.loads(walk).slice(0, 3)).encode()
+    response = transfer(shared_client, source, style_name=STYLES[0], time_warp="false")
+    assert_transfer_ok(response, source, frames=3)
+
+
+# --------------------------------------------------------------------------- style codes
+
+
+@needs_model
+def test_style_code_of_a_name_is_its_table_code(shared_client):
+    name = STYLES[1]
+    response = shared_client.post("/v1/style-code", data={"style_name": name})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert len(body["code"]) == ENTRY["extra"]["style_dim"]
+    np.testing.assert_allclose(body["code"], ENTRY["extra"]["styles"][name]["code"], atol=1e-5)
+    assert body["nearest"][0] == {"style": name, "distance": 0.0}
+    distances = [n["distance"] for n in body["nearest"]]
+    assert len(distances) == 5 and distances == sorted(distances)
+
+
+@needs_model
+def test_style_code_of_keypoints(shared_client, treadmill_zip):
+    files = {"keypoints": ("k.zip", treadmill_zip, "application/octet-stream")}
+    response = shared_client.post("/v1/style-code", files=files, data={"keypoints_fps": "23.976"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert len(body["code"]) == ENTRY["extra"]["style_dim"] and body["velocity_factor"] is None
+    assert {n["style"] for n in body["nearest"]} <= set(STYLES)
+
+
+HELD_OUT = (  # short held-out takes of the shipped split: the style is in the nearest 3
+    "dataset-1_dash_proud_001",
+    "dataset-1_run_tired_001",
+    "dataset-1_walk-right_masculinity_001",
+    "dataset-1_run_not-confident_001",
+)
+
+
+@needs_model
+def test_held_out_clips_are_near_their_style(shared_client):
+    split = json.loads((Settings().models_dir / ENTRY["extra"]["split"]).read_text())
+    hits = 0
+    takes = [t for t in HELD_OUT if t in split["val_takes"]]
+    if not takes:
+        pytest.skip("the shipped split holds none of the chosen takes")
+    for take in takes:
+        style = take.split("_")[2]
+        files = {"style": ("s.bvh", bandai(take), "text/plain")}
+        body = shared_client.post("/v1/style-code", files=files).json()
+        assert len(body["code"]) == ENTRY["extra"]["style_dim"]
+        hits += style in [n["style"] for n in body["nearest"][:3]]
+    assert hits >= len(takes) - 1, f"{hits} of {len(takes)} held-out clips near their style"
+
+
+# --------------------------------------------------------------------------- errors
+
+
+@needs_model
+def test_no_or_several_style_inputs_are_400(shared_client, walk):
+    body = assert_problem(transfer(shared_client, walk), 400, "invalid-request")
+    assert body["fields"] == []
+    body = assert_problem(
+        transfer(
+            shared_client,
+            walk,
+            files={"style": ("s.bvh", walk, "text/plain")},
+            style_name=STYLES[0],
+        ),
+        400,
+        "invalid-request",
+    )
+    assert body["fields"] == ["style", "style_name"]
+    assert "style_name" in body["detail"]
+    assert_problem(shared_client.post("/v1/style-code", data={}), 400, "invalid-request")
+
+
+@needs_model
+def test_unknown_style_name_is_404(shared_client, walk):
+    body = assert_problem(transfer(shared_client, walk, style_name="no-such-style"), 404)
+    assert body["styles"] == STYLES
+    mix = json.dumps({STYLES[0]: 1, "no-such-style": 1})
+    assert_problem(transfer(shared_client, walk, style_mix=mix), 404, "not-found")
+    response = shared_client.post("/v1/style-code", data={"style_name": "no-such-style"})
+    assert_problem(response, 404, "not-found")
+
+
+@needs_model
+@pytest.mark.parametrize("mix", ["{not json", "[1, 2]", '{"happy": -1}', "{}", '{"a": "b"}'])
+def test_bad_style_mix_is_400(shared_client, walk, mix):
+    body = assert_problem(transfer(shared_client, walk, style_mix=mix), 400, "invalid-request")
+    assert body["field"] == "style_mix"
+
+
+@needs_model
+@pytest.mark.parametrize("strength", ["2", "-0.5", "nan", "strong"])
+def test_strength_out_of_range_is_400(shared_client, walk, strength):
+    response = transfer(shared_client, walk, style_name=STYLES[0], strength=strength)
+    assert_problem(response, 400, "invalid-request")
+
+
+@needs_model
+def test_non_bvh_content_is_400_with_line(shared_client):
+    text = b"HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n"
+    body = assert_problem(transfer(shared_client, text, style_name=STYLES[0]), 400)
+    assert body["line"] == 4
+
+
+@needs_model
+def test_unmappable_skeleton_is_422(shared_client, walk):
+    body = assert_problem(
+        transfer(shared_client, UNMAPPABLE, style_name=STYLES[0]), 422, "unusable-input"
+    )
+    assert body["unmapped"]
+    files = {"style": ("s.bvh", UNMAPPABLE, "text/plain")}
+    body = assert_problem(transfer(shared_client, walk, files=files), 422, "unusable-input")
+    assert body["unmapped"]
+
+
+@needs_model
+def test_wrong_media_types_are_415(shared_client, walk):
+    files = {"keypoints": ("k.png", b"\x89PNG\r\n\x1a\n", "image/png")}
+    assert_problem(transfer(shared_client, walk, files=files), 415, "unsupported-media-type")
+    files = {"style": ("s.png", b"\x89PNG\r\n\x1a\n", "image/png")}
+    assert_problem(transfer(shared_client, walk, files=files), 415, "unsupported-media-type")
+
+
+@needs_model
+def test_bad_keypoints_and_mappings_are_400(shared_client, walk):
+    files = {"keypoints": ("k.json", b"{not json", "application/json")}
+    assert_problem(transfer(shared_client, walk, files=files), 400)
+    files = {"style": ("s.bvh", walk, "text/plain")}
+    body = assert_problem(
+        transfer(shared_client, walk, files=files, style_mapping="[1]"), 400, "invalid-request"
+    )
+    assert body["field"] == "style_mapping"
+    response = transfer(shared_client, walk, style_name=STYLES[0], mapping="{nope")
+    assert_problem(response, 400, "invalid-request")
+
+
+@needs_model
+def test_too_many_frames_is_413(make_client, walk):
+    client = make_client(Settings(max_frames=10))
+    body = assert_problem(transfer(client, walk, style_name=STYLES[0]), 413, "too-large")
+    assert body["limit"] == 10
