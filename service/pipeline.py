@@ -38,13 +38,24 @@ from motion.skeleton import Motion
 from service import limits, metrics
 from service.config import Settings
 from service.engines.base import Engine
-from service.errors import PayloadTooLarge, ServiceError, UnsupportedMediaType
+from service.errors import PayloadTooLarge, ServiceError, UnsupportedMediaType, problem_responses
 
 Format = Literal["bvh", "json"]
 
 # Media types a BVH upload may carry (clients label text files in many ways).
 TEXT_TYPES = ("text/", "application/octet-stream", "application/x-bvh", "application/bvh")
 BVH_MEDIA_TYPE = "text/plain; charset=utf-8"
+
+
+def bvh_responses(description: str) -> dict:
+    """OpenAPI ``responses`` of a route that answers BVH (or JSON with ``?format=json``)."""
+    return {
+        200: {
+            "content": {"text/plain": {}, "application/json": {}},
+            "description": description,
+        },
+        **problem_responses(400, 404, 413, 415, 422, 503, 504),
+    }
 
 
 class InvalidField(ServiceError):

@@ -15,7 +15,7 @@ from service import limits, pipeline
 from service.config import Settings
 from service.deps import RegistryDep, SettingsDep
 from service.engines.dance import DanceEngine
-from service.errors import NotFound, PayloadTooLarge, UnsupportedMediaType, problem_responses
+from service.errors import NotFound, PayloadTooLarge, UnsupportedMediaType
 from service.inference import run_inference
 from service.metrics import StageTimer
 
@@ -94,13 +94,7 @@ async def read_skeleton(skeleton: UploadFile | str | None, settings: Settings) -
     "/v1/dance",
     summary="Generate a dance for a whole song (BVH as long as the decoded audio)",
     response_class=pipeline.Response,
-    responses={
-        200: {
-            "content": {"text/plain": {}, "application/json": {}},
-            "description": "BVH on the canonical skeleton, or on `skeleton` when given",
-        },
-        **problem_responses(400, 404, 413, 415, 422, 503, 504),
-    },
+    responses=pipeline.bvh_responses("BVH on the canonical skeleton, or on `skeleton` when given"),
 )
 async def create_dance(
     request: Request,

@@ -9,7 +9,7 @@ from fastapi import APIRouter, File, Form, Query, Request, UploadFile
 from service import pipeline
 from service.deps import RegistryDep, SettingsDep
 from service.engines.fast import FastEngine
-from service.errors import NotFound, NotReady, problem_responses
+from service.errors import NotFound, NotReady
 from service.inference import run_inference
 from service.metrics import StageTimer
 
@@ -33,13 +33,7 @@ def find_engine(registry, style_name: str) -> FastEngine:
     "/v1/stylize",
     summary="Re-style a BVH clip with one named style (fast feed-forward networks)",
     response_class=pipeline.Response,
-    responses={
-        200: {
-            "content": {"text/plain": {}, "application/json": {}},
-            "description": "BVH on the content's skeleton and frame rate (or JSON)",
-        },
-        **problem_responses(400, 404, 413, 415, 422, 503, 504),
-    },
+    responses=pipeline.bvh_responses("BVH on the content's skeleton and frame rate (or JSON)"),
 )
 async def stylize_clip(
     request: Request,

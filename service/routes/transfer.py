@@ -190,13 +190,7 @@ STYLE_DOC = {
     "/v1/transfer",
     summary="Re-style a BVH clip by an example clip, a video's keypoints, a name or a mix",
     response_class=pipeline.Response,
-    responses={
-        200: {
-            "content": {"text/plain": {}, "application/json": {}},
-            "description": "BVH on the content's skeleton and frame rate (or JSON)",
-        },
-        **problem_responses(400, 404, 413, 415, 422, 503, 504),
-    },
+    responses=pipeline.bvh_responses("BVH on the content's skeleton and frame rate (or JSON)"),
 )
 async def transfer(
     request: Request,
