@@ -99,3 +99,13 @@ export-translator: $(VENV)/.dev
 
 eval-translator: $(VENV)/.dev
 	@echo "eval-translator: not written yet (held-out takes: models/translator/split.json)"; exit 1
+
+# Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
+# BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the
+# translator pipeline, and the loopback load test. Not part of `make test`.
+.PHONY: bench
+bench: $(VENV)/.dev
+	$(PY) -m bench.bench_motion
+	$(PY) -m bench.bench_fast
+	$(PY) -m bench.bench_translator
+	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
