@@ -225,13 +225,7 @@ def decode(
     if x.ndim != 2 or x.shape[1] != MOTION_CHANNELS:
         raise MotionError(f"dance features must be (frames, {MOTION_CHANNELS}), got {x.shape}")
     frames = len(x)
-    angle = heading + np.concatenate([[0.0], np.cumsum(x[:-1, TURN]) / fps])
-    face = rot.about_y(angle)
-    step = np.zeros((frames, 3))
-    step[:, [0, 2]] = x[:, VELOCITY] * LEG / fps
-    world_step = rot.apply(face, step)
-    origin = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64) * [1, 0, 1]
-    root = origin + np.concatenate([np.zeros((1, 3)), np.cumsum(world_step[:-1], axis=0)])
+    root, face = K.integrate_root(x[:, VELOCITY] * LEG, x[:, TURN], fps, start, heading)
     lrot = rot.identity((frames, len(C.JOINTS)))
     body = rot.from_6d(x[:, ROTATIONS].reshape(frames, len(BODY), 6))
     lrot[:, BODY] = body

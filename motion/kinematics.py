@@ -121,6 +121,33 @@ def root_velocities(
     return local[..., [0, 2]], turn
 
 
+def integrate_root(
+    velocity: np.ndarray,
+    turn: np.ndarray,
+    fps: float,
+    start: np.ndarray | None = None,
+    heading: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Root path on the floor ``(F, 3)`` and facing rotations ``(F, 4)`` from per-frame
+    velocities in the facing frame ``(F, 2)`` (sideways x, forward z; units per second)
+    and turning velocities ``(F,)`` (rad/s), the inverse of :func:`root_velocities`.
+
+    The root starts at ``start`` (its height ignored; the origin by default) facing
+    ``heading`` radians about +Y; the step from frame t to t + 1 is frame t's velocity
+    turned by frame t's heading.
+    """
+    velocity = np.asarray(velocity, dtype=np.float64)
+    frames = len(velocity)
+    angle = heading + np.concatenate([[0.0], np.cumsum(np.asarray(turn, float)[:-1]) / fps])
+    face = rot.about_y(angle)
+    step = np.zeros((frames, 3))
+    step[:, [0, 2]] = velocity / fps
+    world_step = rot.apply(face, step)
+    origin = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64) * [1, 0, 1]
+    root = origin + np.concatenate([np.zeros((1, 3)), np.cumsum(world_step[:-1], axis=0)])
+    return root, face
+
+
 def velocities(x: np.ndarray, fps: float) -> np.ndarray:
     """Finite-difference velocities along axis 0 (per second), same shape; frame 0 copies frame 1."""
     x = np.asarray(x, dtype=np.float64)
