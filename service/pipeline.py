@@ -65,13 +65,21 @@ class InvalidField(ServiceError):
         super().__init__(400, "Invalid request", detail, slug="invalid-request", **ext)
 
 
-async def read_upload(upload: UploadFile, settings: Settings, *, field: str = "content") -> bytes:
-    """The bytes of an uploaded BVH file: 415 when its media type is not text (or a generic
-    binary type), 413 over ``max_upload_bytes`` (the middleware usually stops it first)."""
+async def read_upload(
+    upload: UploadFile,
+    settings: Settings,
+    *,
+    field: str = "content",
+    accept: tuple[str, ...] = TEXT_TYPES,
+    what: str = "a BVH text file",
+) -> bytes:
+    """The bytes of an uploaded file: 415 when its media type starts with none of ``accept``
+    (``'<field>' must be <what>``), 413 over ``max_upload_bytes`` (the middleware usually
+    stops it first), 400 when empty."""
     media = (upload.content_type or "").split(";")[0].strip().lower()
-    if media and not media.startswith(TEXT_TYPES):
+    if media and not media.startswith(accept):
         raise UnsupportedMediaType(
-            f"'{field}' must be a BVH text file, got media type {media!r}", field=field
+            f"'{field}' must be {what}, got media type {media!r}", field=field
         )
     data = await upload.read(settings.max_upload_bytes + 1)
     if len(data) > settings.max_upload_bytes:

@@ -15,7 +15,7 @@ from service import limits, pipeline
 from service.config import Settings
 from service.deps import RegistryDep, SettingsDep
 from service.engines.dance import DanceEngine
-from service.errors import NotFound, PayloadTooLarge, UnsupportedMediaType
+from service.errors import NotFound, PayloadTooLarge
 from service.inference import run_inference
 from service.metrics import StageTimer
 
@@ -36,23 +36,10 @@ def find_engine(registry) -> DanceEngine:
 
 
 async def read_audio(upload: UploadFile, settings: Settings) -> bytes:
-    """The bytes of the uploaded audio: 415 for a media type that is not audio (or generic
-    binary), 413 over ``max_upload_bytes``, 400 when empty."""
-    media = (upload.content_type or "").split(";")[0].strip().lower()
-    if media and not media.startswith(AUDIO_TYPES):
-        raise UnsupportedMediaType(
-            f"'audio' must be wav, flac, ogg or mp3, got media type {media!r}", field="audio"
-        )
-    data = await upload.read(settings.max_upload_bytes + 1)
-    if len(data) > settings.max_upload_bytes:
-        raise PayloadTooLarge(
-            f"'audio' is over {settings.max_upload_bytes} bytes",
-            limit=settings.max_upload_bytes,
-            limit_name="max_upload_bytes",
-        )
-    if not data:
-        raise pipeline.InvalidField("'audio' is empty", field="audio")
-    return data
+    """The bytes of the uploaded audio; see ``pipeline.read_upload``."""
+    return await pipeline.read_upload(
+        upload, settings, field="audio", accept=AUDIO_TYPES, what="wav, flac, ogg or mp3"
+    )
 
 
 ABSENT = ("", "null", "none", "auto")

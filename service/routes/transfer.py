@@ -29,7 +29,7 @@ from service import limits, pipeline
 from service.config import Settings
 from service.deps import RegistryDep, SettingsDep
 from service.engines.translator import StyleCode, Transfer, TranslatorEngine, parse_mix
-from service.errors import NotFound, PayloadTooLarge, UnsupportedMediaType, problem_responses
+from service.errors import NotFound, problem_responses
 from service.inference import run_inference
 from service.metrics import StageTimer
 
@@ -56,24 +56,14 @@ def find_engine(registry) -> TranslatorEngine:
 
 
 async def read_keypoints_upload(upload: UploadFile, settings: Settings) -> bytes:
-    """The bytes of an uploaded keypoint file (zip or JSON): 415 for other media types, 413
-    over ``max_upload_bytes``, 400 when empty."""
-    media = (upload.content_type or "").split(";")[0].strip().lower()
-    if media and not media.startswith(KEYPOINT_TYPES):
-        raise UnsupportedMediaType(
-            f"'keypoints' must be an OpenPose zip or JSON file, got media type {media!r}",
-            field="keypoints",
-        )
-    data = await upload.read(settings.max_upload_bytes + 1)
-    if len(data) > settings.max_upload_bytes:
-        raise PayloadTooLarge(
-            f"'keypoints' is over {settings.max_upload_bytes} bytes",
-            limit=settings.max_upload_bytes,
-            limit_name="max_upload_bytes",
-        )
-    if not data.strip():
-        raise pipeline.InvalidField("'keypoints' is empty", field="keypoints")
-    return data
+    """The bytes of an uploaded keypoint file (zip or JSON); see ``pipeline.read_upload``."""
+    return await pipeline.read_upload(
+        upload,
+        settings,
+        field="keypoints",
+        accept=KEYPOINT_TYPES,
+        what="an OpenPose zip or JSON file",
+    )
 
 
 @dataclass
