@@ -309,9 +309,13 @@ def velocity_factor(motion: Motion) -> float:
     """The paper's velocity factor (eq. 2): the temporal mean of the largest joint speed in
     the root-local frame, in skeleton units per second."""
     _check(motion)
-    enc = encode(motion)
-    local = enc.style3d.reshape(motion.num_frames, len(BODY), 3).astype(np.float64) * LEG
-    speed = np.linalg.norm(K.velocities(local, motion.fps), axis=-1)
+    return encoded_velocity_factor(encode(motion), motion.fps)
+
+
+def encoded_velocity_factor(enc: Encoded, fps: float = FPS) -> float:
+    """:func:`velocity_factor` from an encoding already made (no second FK pass)."""
+    local = enc.style3d.reshape(len(enc.style3d), len(BODY), 3).astype(np.float64) * LEG
+    speed = np.linalg.norm(K.velocities(local, fps), axis=-1)
     return float(speed.max(axis=-1).mean())
 
 

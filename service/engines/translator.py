@@ -29,7 +29,6 @@ import numpy as np
 from motion import contacts as CT
 from motion import features as Fe
 from motion import ik
-from motion import kinematics as K
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from service.engines import register_engine
@@ -81,13 +80,6 @@ def pad_mirrored(x: np.ndarray, total: int) -> tuple[np.ndarray, int]:
     extra = total - len(x)
     before = extra // 2
     return np.pad(x, ((before, extra - before), (0, 0)), mode="symmetric"), before
-
-
-def velocity_factor(enc: Fe.Encoded, fps: float = Fe.FPS) -> float:
-    """``motion.features.velocity_factor`` from an encoding already made (no second FK)."""
-    local = enc.style3d.reshape(len(enc.style3d), -1, 3).astype(np.float64) * Fe.LEG
-    speed = np.linalg.norm(K.velocities(local, fps), axis=-1)
-    return float(speed.max(axis=-1).mean())
 
 
 def parse_mix(text: str) -> dict[str, float]:
@@ -164,7 +156,7 @@ class TranslatorEngine(Engine):
         timer = timer or StageTimer(self.name)
         with timer.stage("style_features"):
             enc = Fe.encode(canon)
-            velocity = velocity_factor(enc, canon.fps)
+            velocity = Fe.encoded_velocity_factor(enc, canon.fps)
         with timer.stage("style_encode"):
             code = self._style_net("style3d", "style3d", enc.style3d)
         return StyleCode(code, velocity, "style")
@@ -267,7 +259,7 @@ class TranslatorEngine(Engine):
         factor = 1.0
         if time_warp:
             with timer.stage("time_warp"):
-                content_velocity = velocity_factor(enc, content.fps)
+                content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
                 factor, warnings = self.warp_factor(style_velocity, content_velocity, strength)
                 if factor != 1.0:
                     motion = Fe.time_warp(motion, factor)

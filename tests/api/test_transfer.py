@@ -22,7 +22,6 @@ from service.engines.translator import (
     pad_mirrored,
     padded_length,
     parse_mix,
-    velocity_factor,
 )
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
@@ -141,7 +140,9 @@ def test_padding_buckets_and_mirroring():
 
 def test_velocity_factor_from_an_encoding_is_the_features_one(walk):
     canon = retarget.to_canonical(bvh.loads(walk))
-    assert velocity_factor(Fe.encode(canon)) == pytest.approx(Fe.velocity_factor(canon), 1e-12)
+    assert Fe.encoded_velocity_factor(Fe.encode(canon)) == pytest.approx(
+        Fe.velocity_factor(canon), 1e-12
+    )
 
 
 def test_parse_mix():
