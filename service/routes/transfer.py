@@ -21,7 +21,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Query, Request, UploadFile
 from fastapi.responses import JSONResponse
 
 from motion import features as Fe
@@ -77,6 +77,36 @@ class StyleInput:
     mix: dict[str, float] | None = None
     keypoints_fps: float | None = None  # None: the document's rate, else 30
     mapping: dict[str, str] | None = None
+
+
+@dataclass
+class StyleFields:
+    """The style form fields /v1/transfer and /v1/style-code share (at most one is set)."""
+
+    style: UploadFile | None
+    keypoints: UploadFile | None
+    style_name: str | None
+    style_mix: str | None
+    keypoints_fps: float | None
+    style_mapping: str | None
+
+
+def read_style_fields(
+    style: Annotated[UploadFile, File(description=STYLE_DOC["style"])] = None,
+    keypoints: Annotated[UploadFile, File(description=STYLE_DOC["keypoints"])] = None,
+    style_name: Annotated[
+        str | None, Form(max_length=100, description=STYLE_DOC["style_name"])
+    ] = None,
+    style_mix: Annotated[
+        str | None, Form(max_length=10_000, description=STYLE_DOC["style_mix"])
+    ] = None,
+    keypoints_fps: Annotated[
+        float, Form(gt=0, le=1000, description=STYLE_DOC["keypoints_fps"])
+    ] = None,  # type: ignore[assignment]  (None: the document's rate, else 30)
+    style_mapping: Annotated[str | None, Form(description=STYLE_DOC["style_mapping"])] = None,
+) -> StyleFields:
+    """The shared style fields as one dependency, so both routes declare them once."""
+    return StyleFields(style, keypoints, style_name, style_mix, keypoints_fps, style_mapping)
 
 
 async def read_style_input(
@@ -187,29 +217,15 @@ async def transfer(
     registry: RegistryDep,
     settings: SettingsDep,
     content: Annotated[UploadFile, File(description="content clip (BVH)")],
-    style: Annotated[UploadFile, File(description=STYLE_DOC["style"])] = None,
-    keypoints: Annotated[UploadFile, File(description=STYLE_DOC["keypoints"])] = None,
-    style_name: Annotated[
-        str | None, Form(max_length=100, description=STYLE_DOC["style_name"])
-    ] = None,
-    style_mix: Annotated[
-        str | None, Form(max_length=10_000, description=STYLE_DOC["style_mix"])
-    ] = None,
-    keypoints_fps: Annotated[
-        float, Form(gt=0, le=1000, description=STYLE_DOC["keypoints_fps"])
-    ] = None,  # type: ignore[assignment]  (None: the document's rate, else 30)
+    style_fields: Annotated[StyleFields, Depends(read_style_fields)],
     strength: Annotated[float, Form(ge=0, le=1, description="0 keeps the content's style")] = 1.0,
     time_warp: Annotated[bool, Form(description="warp time by the velocity ratio")] = True,
     foot_cleanup: Annotated[bool, Form(description="pin the content's foot contacts")] = True,
     mapping: Annotated[str | None, Form(description="JSON joint-name map (content)")] = None,
-    style_mapping: Annotated[str | None, Form(description=STYLE_DOC["style_mapping"])] = None,
     format: Annotated[pipeline.Format, Query()] = "bvh",  # noqa: A002
 ) -> pipeline.Response:
     engine = find_engine(registry)
-    style_input = await read_style_input(
-        engine, settings, style=style, keypoints=keypoints, style_name=style_name,
-        style_mix=style_mix, keypoints_fps=keypoints_fps, style_mapping=style_mapping,
-    )  # fmt: skip
+    style_input = await read_style_input(engine, settings, **vars(style_fields))
     data = await pipeline.read_upload(content, settings)
     joint_map = pipeline.parse_mapping(mapping)
 
@@ -249,24 +265,10 @@ async def style_code_of(
     request: Request,
     registry: RegistryDep,
     settings: SettingsDep,
-    style: Annotated[UploadFile, File(description=STYLE_DOC["style"])] = None,
-    keypoints: Annotated[UploadFile, File(description=STYLE_DOC["keypoints"])] = None,
-    style_name: Annotated[
-        str | None, Form(max_length=100, description=STYLE_DOC["style_name"])
-    ] = None,
-    style_mix: Annotated[
-        str | None, Form(max_length=10_000, description=STYLE_DOC["style_mix"])
-    ] = None,
-    keypoints_fps: Annotated[
-        float, Form(gt=0, le=1000, description=STYLE_DOC["keypoints_fps"])
-    ] = None,  # type: ignore[assignment]  (None: the document's rate, else 30)
-    style_mapping: Annotated[str | None, Form(description=STYLE_DOC["style_mapping"])] = None,
+    style_fields: Annotated[StyleFields, Depends(read_style_fields)],
 ) -> JSONResponse:
     engine = find_engine(registry)
-    style_input = await read_style_input(
-        engine, settings, style=style, keypoints=keypoints, style_name=style_name,
-        style_mix=style_mix, keypoints_fps=keypoints_fps, style_mapping=style_mapping,
-    )  # fmt: skip
+    style_input = await read_style_input(engine, settings, **vars(style_fields))
 
     def work() -> tuple[StyleCode, StageTimer]:
         timer = StageTimer(engine.name)
