@@ -57,7 +57,7 @@ train-translator: $(VENV)/.dev
 # weights in checkpoints/fast/. Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
 FAST_AE_ARGS ?= --steps 3600 --minutes 25
 FAST_STYLE_ARGS ?= --steps 800 --minutes-per-style 2
-.PHONY: train-fast export-fast eval-fast bench-fast
+.PHONY: train-fast export-fast eval-fast eval-styles bench-fast
 train-fast: $(VENV)/.dev
 	$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS)
 	$(PY) -m training.fast_style --all $(FAST_STYLE_ARGS)
@@ -65,8 +65,13 @@ train-fast: $(VENV)/.dev
 export-fast: $(VENV)/.dev
 	$(PY) -m model_export.fast
 
+# Style and content recognition and foot skating of the shipped fast networks on their
+# held-out takes, beside the baselines (training/eval_style.py); eval-styles runs both families.
 eval-fast: $(VENV)/.dev
-	@echo "eval-fast: not written yet (held-out takes: models/fast/split.json)"; exit 1
+	$(PY) -m training.eval_style fast --json runs/eval/fast.json
+
+eval-styles: $(VENV)/.dev
+	$(PY) -m training.eval_style all --json runs/eval/styles.json
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
@@ -98,14 +103,16 @@ export-translator: $(VENV)/.dev
 	$(PY) -m model_export.translator $(EXPORT_TRANSLATOR_ARGS)
 
 eval-translator: $(VENV)/.dev
-	@echo "eval-translator: not written yet (held-out takes: models/translator/split.json)"; exit 1
+	$(PY) -m training.eval_style translator --json runs/eval/translator.json
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
 # BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the
-# translator pipeline, and the loopback load test. Not part of `make test`.
+# translator pipeline, dance generation for a 3-minute song, and the loopback load test.
+# Not part of `make test`.
 .PHONY: bench
 bench: $(VENV)/.dev
 	$(PY) -m bench.bench_motion
 	$(PY) -m bench.bench_fast
 	$(PY) -m bench.bench_translator
+	$(PY) -m bench.bench_dance
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)

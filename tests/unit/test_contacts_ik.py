@@ -126,6 +126,23 @@ def test_foot_skating_measures_sliding_speed():
         CT.foot_skating(gpos, contacts[:, [0, 0]], fps, [1])
 
 
+def test_foot_sliding_weighs_speed_by_closeness_to_the_ground():
+    frames, fps = 40, 30.0
+    gpos = np.zeros((frames, 2, 3))
+    gpos[:, 1, 0] = np.arange(frames) * 0.5  # 15 units per second along X, on the floor
+    assert CT.foot_sliding(gpos, fps, [1], height=2.0, scale=1.0) == pytest.approx(15.0)
+    lifted = gpos.copy()
+    lifted[20:, 1, 1] = 1.0  # half the time 1 unit up: weight 2 - 2 ** 0.5
+    expected = 15.0 * (20 + 20 * (2 - 2**0.5)) / 40
+    assert CT.foot_sliding(lifted, fps, [1], height=2.0, scale=1.0) == pytest.approx(expected)
+    lifted[20:, 1, 1] = 5.0  # above the threshold: not counted
+    assert CT.foot_sliding(lifted, fps, [1], height=2.0, scale=1.0) == pytest.approx(7.5, rel=0.05)
+    planted = np.zeros_like(gpos)
+    assert CT.foot_sliding(planted, fps, [1], height=2.0, scale=1.0) == 0.0
+    with pytest.raises(MotionError):
+        CT.foot_sliding(gpos[..., :2], fps, [1], height=2.0)
+
+
 def test_foot_skating_on_real_data_is_small(walk, cmu_walk):
     skate = CT.canonical_foot_skating(walk)
     assert 0.0 < skate < 0.1 * C.leg_length()  # cm/s, well under 0.1 leg lengths a second
@@ -135,6 +152,10 @@ def test_foot_skating_on_real_data_is_small(walk, cmu_walk):
     leg = CT.chain_length(sk, sk.index("LeftUpLeg"), sk.index("LeftFoot"))
     labels = CT.foot_contacts(gpos, cmu_walk.fps, feet, scale=leg)
     assert CT.foot_skating(gpos, labels, cmu_walk.fps, feet, leg_length=leg) < 0.25
+    # sliding needs no labels: a real walk's feet move far slower near the floor than overall
+    feet = K.global_positions(walk)[:, list(CT.CANONICAL_FOOT_JOINTS)]
+    overall = CT.horizontal_speed(feet, walk.fps).mean()
+    assert 0.0 < CT.canonical_foot_sliding(walk) < 0.3 * overall
 
 
 # --------------------------------------------------------------------------- two-bone IK

@@ -1,0 +1,275 @@
+"""Evaluation of the style families as shipped (aberman2020 translator, holden2017 fast
+networks): style and content recognition of their outputs, and foot skating.
+
+    python -m training.eval_style translator|fast|all [--json PATH] [--limit N]
+
+For a family, the held-out takes are the Bandai takes its training never saw (its bundle's
+``split.json``): 51 takes for the translator, 73 for the fast networks, too few for a
+leave-one-take-out classifier to see every style and content. So a style classifier and
+a content classifier (balanced logistic regression on 1.5-second windows of pose, speed and
+trajectory statistics, a clip's label the argmax of its windows' mean log-probability)
+learn from the first half of every held-out take, and everything is judged on second
+halves: each held-out take's second half is sent to every style through the shipped
+engine, exactly as the service runs it (onnxruntime, time warp and foot clean-up), and
+the output is scored against the target style and the take's content. Baselines, judged by the
+same classifiers:
+
+- ``unchanged``: the output is the content clip itself;
+- ``real target``: the output is a real Bandai clip of X's content in the target style
+  (from the family's training takes, which the classifiers never saw), where one exists;
+- ``real held-out``: each held-out clip against its own labels (the classifiers' ceiling).
+
+Foot skating is foot sliding as Zhang et al. (2018) measure it, in cm/s: feet and toes'
+horizontal speed weighted by how close they are to the clip's ground (within 2.5 cm), so
+it needs no contact labels and judges generated and real clips alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from motion import contacts as CT
+from motion import features as Fe
+from motion import kinematics as K
+from motion.skeleton import Motion
+
+REPO = Path(__file__).resolve().parent.parent
+WINDOW = 45  # frames (1.5 s at 30 fps)
+HOP = 15
+FAMILIES = ("translator", "fast")
+
+
+# --------------------------------------------------------------------------- features
+
+
+def window_features(motion: Motion, window: int = WINDOW, hop: int = HOP) -> np.ndarray:
+    """``(W, D)`` statistics of overlapping windows of a canonical 30 fps motion: mean and
+    std of root-local joint positions, mean and std of joint speeds, root speed, turning
+    speed and hips height (all facing-invariant)."""
+    gpos = K.global_positions(motion)
+    facing = Fe.facing(gpos)
+    local = K.root_local(gpos, gpos[:, 0], facing).reshape(len(gpos), -1)
+    speed = np.linalg.norm(K.velocities(local.reshape(len(gpos), -1, 3), motion.fps), axis=-1)
+    root_vel, turn = K.root_velocities(gpos[:, 0], facing, motion.fps)
+    per_frame = np.concatenate(
+        [local, speed, root_vel, np.abs(turn)[:, None], gpos[:, :1, 1]], axis=1
+    )
+    frames = len(per_frame)
+    size = min(window, frames)
+    starts = range(0, max(frames - size, 0) + 1, hop)
+    rows = []
+    for s in starts:
+        w = per_frame[s : s + size]
+        rows.append(np.concatenate([w.mean(0), w.std(0)]))
+    return np.asarray(rows, dtype=np.float64)
+
+
+def skating(motion: Motion) -> float:
+    """Foot sliding in cm/s (``motion.contacts.canonical_foot_sliding``)."""
+    return CT.canonical_foot_sliding(motion)
+
+
+class ClipClassifier:
+    """Logistic regression on window features; a clip's label is the argmax of its windows'
+    mean log-probability. Classes are weighted by their inverse frequency: Bandai 2 has
+    many takes of few styles, and an unweighted classifier answers those styles for
+    anything it is unsure of."""
+
+    def __init__(self, features: list[np.ndarray], labels: list[str]) -> None:
+        from sklearn.linear_model import LogisticRegression
+        from sklearn.pipeline import make_pipeline
+        from sklearn.preprocessing import StandardScaler
+
+        x = np.concatenate(features)
+        y = np.concatenate([[lab] * len(f) for f, lab in zip(features, labels, strict=True)])
+        self.model = make_pipeline(
+            StandardScaler(), LogisticRegression(C=1.0, max_iter=3000, class_weight="balanced")
+        )
+        self.model.fit(x, y)
+        self.classes = list(self.model.classes_)
+
+    def predict(self, features: np.ndarray) -> str:
+        logp = self.model.predict_log_proba(features).mean(axis=0)
+        return str(self.classes[int(np.argmax(logp))])
+
+
+# --------------------------------------------------------------------------- families
+
+
+def load_engine(family: str):
+    """The shipped engine of ``family``, loaded as the service loads it."""
+    from service.config import Settings
+    from service.engines.fast import FastEngine
+    from service.engines.translator import TranslatorEngine
+    from service.manifest import load_manifest
+
+    settings = Settings()
+    manifest = load_manifest(settings.models_dir)
+    entry = next(m for m in manifest.models if m.family == family)
+    cls = {"translator": TranslatorEngine, "fast": FastEngine}[family]
+    engine = cls(entry, settings.models_dir, settings)
+    engine.load()
+    return engine, entry, settings.models_dir
+
+
+def held_out_takes(family: str, entry, models_dir: Path) -> set[str]:
+    split = next(f.path for f in entry.files if f.path.endswith("split.json"))
+    data = json.loads((models_dir / split).read_text())
+    return set(data.get("val_takes") or data["validation_takes"])
+
+
+def style_names(family: str, engine) -> list[str]:
+    if family == "translator":
+        return list(engine.style_names)
+    return sorted(engine.style_info)
+
+
+def transfer(family: str, engine, canon: Motion, style: str) -> Motion:
+    """``canon`` in ``style`` through the shipped engine, as the service runs it."""
+    from service.metrics import StageTimer
+
+    if family == "translator":
+        target = engine.code_of_name(style)
+        return engine.transfer(canon, target.code, style_velocity=target.velocity).motion
+    return engine.stylize(canon, style, StageTimer(engine.name))
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+@dataclass
+class Tally:
+    style: list[bool] = field(default_factory=list)
+    content: list[bool] = field(default_factory=list)
+    skating: list[float] = field(default_factory=list)
+
+    def add(self, style_ok: bool, content_ok: bool, skate: float) -> None:
+        self.style.append(style_ok)
+        self.content.append(content_ok)
+        self.skating.append(skate)
+
+    def summary(self) -> dict:
+        skate = float(np.mean(self.skating)) if self.skating else None
+        return {
+            "n": len(self.style),
+            "style_accuracy": round(float(np.mean(self.style)), 4) if self.style else None,
+            "content_accuracy": round(float(np.mean(self.content)), 4) if self.content else None,
+            "foot_skating_cm_s": round(skate, 2) if skate is not None else None,
+        }
+
+
+def halves(motion: Motion) -> tuple[Motion, Motion]:
+    """First and second half of a clip: classifiers learn from the first halves of the
+    held-out takes, everything is judged on second halves."""
+    mid = motion.num_frames // 2
+    return motion.slice(0, mid), motion.slice(mid, motion.num_frames)
+
+
+def evaluate(family: str, limit: int | None = None, log=print) -> dict:
+    from training.data import load_bandai
+
+    engine, entry, models_dir = load_engine(family)
+    held = held_out_takes(family, entry, models_dir)
+    styles = style_names(family, engine)
+    clips = load_bandai()
+    held_list = [c for c in clips if c.take in held]
+    real_of = {}  # (content, style) -> a real clip from the family's training takes
+    for c in clips:
+        if c.take not in held:
+            real_of.setdefault((c.content, c.style), c)
+
+    started = time.time()
+    first = {c.take: halves(c.motion)[0] for c in held_list}
+    train_feats = [window_features(first[c.take]) for c in held_list]
+    style_clf = ClipClassifier(train_feats, [c.style for c in held_list])
+    content_clf = ClipClassifier(train_feats, [c.content for c in held_list])
+    judged: dict[str, tuple[str, str, float]] = {}
+
+    def judge(take: str, motion: Motion) -> tuple[str, str, float]:
+        if take not in judged:
+            f = window_features(motion)
+            judged[take] = (style_clf.predict(f), content_clf.predict(f), skating(motion))
+        return judged[take]
+
+    names = ("real held-out", "unchanged", "real target", family,
+             f"{family} (pairs with a real target)")  # fmt: skip
+    rows = {k: Tally() for k in names}
+    per_style: dict[str, Tally] = {s: Tally() for s in styles}
+    test = held_list[:limit] if limit else held_list
+    for i, x in enumerate(test):
+        second = halves(x.motion)[1]
+        own_style, own_content, own_skate = judge(x.take, second)
+        rows["real held-out"].add(own_style == x.style, own_content == x.content, own_skate)
+        for s in styles:
+            rows["unchanged"].add(own_style == s, own_content == x.content, own_skate)
+            out = transfer(family, engine, second, s)
+            f = window_features(out)
+            ok_style, ok_content = style_clf.predict(f) == s, content_clf.predict(f) == x.content
+            skate = skating(out)
+            rows[family].add(ok_style, ok_content, skate)
+            per_style[s].add(ok_style, ok_content, skate)
+            real = real_of.get((x.content, s))
+            if real is not None:
+                rows[f"{family} (pairs with a real target)"].add(ok_style, ok_content, skate)
+                r_style, r_content, r_skate = judge(real.take, halves(real.motion)[1])
+                rows["real target"].add(r_style == s, r_content == x.content, r_skate)
+        log(
+            f"[{family}] {i + 1}/{len(test)} {x.take}: "
+            f"{rows[family].summary()} ({time.time() - started:.0f} s)"
+        )
+    return {
+        "family": family,
+        "model": f"{entry.name} {entry.version}",
+        "held_out_takes": len(test),
+        "styles": len(styles),
+        "chance_style": round(1 / len(styles), 4),
+        "chance_content": round(1 / len({c.content for c in held_list}), 4),
+        "rows": {k: v.summary() for k, v in rows.items()},
+        "per_style": {k: v.summary() for k, v in per_style.items()},
+        "seconds": round(time.time() - started, 1),
+    }
+
+
+def markdown(report: dict) -> str:
+    lines = [
+        f"**{report['family']}** ({report['model']}): {report['held_out_takes']} held-out takes "
+        f"x {report['styles']} styles; chance: style {report['chance_style']:.0%}, "
+        f"content {report['chance_content']:.0%}",
+        "",
+        "| output | n | style accuracy | content accuracy | foot skating (cm/s) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, row in report["rows"].items():
+        skate = "-" if row["foot_skating_cm_s"] is None else f"{row['foot_skating_cm_s']:.1f}"
+        lines.append(
+            f"| {name} | {row['n']} | {row['style_accuracy']:.1%} | "
+            f"{row['content_accuracy']:.1%} | {skate} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("family", choices=(*FAMILIES, "all"))
+    p.add_argument("--json", type=Path, default=None, help="write the reports here")
+    p.add_argument("--limit", type=int, default=None, help="only the first N held-out takes")
+    args = p.parse_args(argv)
+    families = FAMILIES if args.family == "all" else (args.family,)
+    reports = [evaluate(f, args.limit) for f in families]
+    for r in reports:
+        print()
+        print(markdown(r))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(reports, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
