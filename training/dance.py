@@ -1,7 +1,7 @@
 """Music to dance (jacob2019, made to work): data windows, network, losses, training loop.
 
     python -m training.dance [--max-steps N] [--minutes M] [--resume]
-    python -m training.dance --eval            # held-out songs: beat alignment, energy, genre
+    python -m training.eval_dance              # held-out songs, through the shipped engine
 
 Network (per frame at 30 fps): the song's features (``motion.dance_features.song_features``:
 log-mel, the thesis's spectral summary, onset, beat phase) -> two fully connected layers ->
@@ -42,7 +42,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from motion import beat_warp as BW
 from motion import canonical as C
 from motion import dance_features as DF
 from motion import kinematics as K
@@ -369,7 +368,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many steps")
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall time")
     p.add_argument("--resume", action="store_true", help=f"continue from {CHECKPOINT.name}")
-    p.add_argument("--eval", action="store_true", help="evaluate the checkpoint and exit")
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--window", type=int, default=96, help="frames per training window")
     p.add_argument("--gt-frames", type=int, default=5, help="ground-truth stretch length")
@@ -542,7 +540,7 @@ def train(args: argparse.Namespace) -> None:
     )
 
 
-# --------------------------------------------------------------------------- generation, eval
+# --------------------------------------------------------------------------- generation
 
 
 @torch.no_grad()
@@ -554,7 +552,8 @@ def generate(
     start: np.ndarray,
 ) -> np.ndarray:
     """Raw poses ``(F, M)`` for raw audio input ``(F, A)``, genre vector ``(G,)`` and a raw
-    start pose ``(M,)`` (frame 0), free-running (torch; the service does this in ORT)."""
+    start pose ``(M,)`` (frame 0), free-running (torch; the service does this in ORT, and
+    ``training.eval_dance`` judges the service's result)."""
     model.eval()
     code, _ = model.encode_audio(torch.from_numpy(stats.normalize_audio(audio_raw))[None])
     g = torch.from_numpy(np.asarray(genre, np.float32))[None]
@@ -567,73 +566,8 @@ def generate(
     return stats.denormalize_motion(torch.cat(out).numpy())
 
 
-def dance_bas(motion, beats: np.ndarray, seed: int = 0) -> tuple[float, BW.Baseline]:
-    """Beat-alignment score of a canonical motion against beats (seconds from its frame 0),
-    and its shifted-grid chance level."""
-    kin = BW.kinematic_beats(K.global_positions(motion), motion.fps)
-    return BW.beat_alignment_score(kin, beats), BW.shifted_grid_baseline(kin, beats, seed=seed)
-
-
-def evaluate(path: Path = CHECKPOINT) -> dict:
-    """Held-out songs: BAS of generated (raw and beat-warped) vs real dances vs chance; motion
-    energy over a 10-minute generation; genre accuracy of the audio classifier."""
-    from training.dance_alignment import alignment_for, analyse_music, load_table
-    from training.data import data_dir
-
-    model, stats, _ = load_checkpoint(path)
-    seqs = prepare()
-    _, val = split(seqs)
-    table = load_table()
-    report: dict = {"songs": {}}
-    for s in val:
-        alignment = alignment_for(s.name, table)
-        music = analyse_music(data_dir() / "dance-with-melody" / s.name)
-        beats = np.asarray(music["beats"]) - alignment.offset
-        real, _ = DF.decode(s.motion)
-        gen_raw = generate(model, stats, s.audio, DF.genre_vector(DF.GENRES[s.genre]), s.motion[0])
-        gen, _ = DF.decode(DF.smooth_features(gen_raw))
-        warped = BW.warp_to_beats(gen, beats).motion
-        row = {}
-        for label, m in (("real", real), ("generated", gen), ("warped", warped)):
-            score, base = dance_bas(m, beats)
-            row[label] = {"bas": round(score, 4), "chance": round(base.mean, 4),
-                          "chance_std": round(base.std, 4)}  # fmt: skip
-        code, logits = model.encode_audio(torch.from_numpy(stats.normalize_audio(s.audio))[None])
-        row["genre_predicted"] = DF.MUSIC_GENRES[int(logits.argmax())]
-        row["genre"] = DF.GENRES[s.genre]
-        report["songs"][s.name] = row
-    # 10 minutes: the validation songs' audio looped
-    loop = np.concatenate([s.audio for s in val])
-    frames = int(10 * 60 * DF.FPS)
-    long_audio = np.resize(loop, (frames, loop.shape[1]))
-    gen_raw = generate(model, stats, long_audio, DF.genre_vector("waltz"), val[0].motion[0])
-    motion, _ = DF.decode(gen_raw)
-    speed = BW.joint_speed(K.global_positions(motion), DF.FPS)
-    blocks = speed[: len(speed) // 900 * 900].reshape(-1, 900).mean(axis=1)
-    real_speed = [
-        float(BW.joint_speed(K.global_positions(DF.decode(s.motion)[0]), DF.FPS).mean())
-        for s in val
-    ]
-    report["ten_minutes"] = {
-        "real_speed_mean": round(float(np.mean(real_speed)), 2),
-        "speed_per_30s_min": round(float(blocks.min()), 2),
-        "speed_per_30s_max": round(float(blocks.max()), 2),
-        "speed_first_30s": round(float(blocks[0]), 2),
-        "speed_last_30s": round(float(blocks[-1]), 2),
-        "units": "canonical cm per second, mean over joints",
-    }
-    songs = report["songs"].values()
-    report["genre_accuracy"] = sum(r["genre_predicted"] == r["genre"] for r in songs) / max(
-        len(report["songs"]), 1
-    )
-    return report
-
-
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    if args.eval:
-        print(json.dumps(evaluate(args.checkpoint), indent=1))
-        return 0
     train(args)
     return 0
 

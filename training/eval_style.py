@@ -95,7 +95,7 @@ class ClipClassifier:
         self.classes = list(self.model.classes_)
 
     def predict(self, features: np.ndarray) -> str:
-        logp = self.model.predict_log_proba(features).mean(axis=0)
+        logp = np.log(np.clip(self.model.predict_proba(features), 1e-12, 1.0)).mean(axis=0)
         return str(self.classes[int(np.argmax(logp))])
 
 
