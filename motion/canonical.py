@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from motion.skeleton import Skeleton
+from motion.errors import MotionError
+from motion.skeleton import Motion, Skeleton
 
 FPS = 30.0
 
@@ -140,3 +141,14 @@ BANDAI_REFERENCE_LROT = np.array(
         [-0.00181, -0.15849, 0.00123, 0.98736],
     ]
 )
+
+
+def check_motion(motion: Motion, what: str) -> None:
+    """``MotionError`` (kind "unusable") unless ``motion`` is on the canonical skeleton (same
+    joint names) at :data:`FPS`; ``what`` names the consumer in the message."""
+    if motion.skeleton.names != JOINTS or abs(motion.fps - FPS) > 1e-3:
+        raise MotionError(
+            f"{what} need a canonical motion ({len(JOINTS)} joints) at {FPS:g} fps, got "
+            f"{motion.skeleton.num_joints} joints at {motion.fps:g} fps",
+            kind="unusable",
+        )

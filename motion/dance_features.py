@@ -135,15 +135,6 @@ def drop_beats(x: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- motion
 
 
-def _check(motion: Motion) -> None:
-    if motion.skeleton.names != C.JOINTS or abs(motion.fps - FPS) > 1e-3:
-        raise MotionError(
-            f"dance features need a canonical motion at {FPS:g} fps, got "
-            f"{motion.skeleton.num_joints} joints at {motion.fps:g} fps",
-            kind="unusable",
-        )
-
-
 @dataclass(frozen=True)
 class Encoded:
     """``features (F, MOTION_CHANNELS)`` float32, and where decoding must start to land where
@@ -182,7 +173,7 @@ def dance_contacts(gpos: np.ndarray, fps: float = FPS) -> np.ndarray:
 def encode(motion: Motion, contacts: np.ndarray | None = None) -> Encoded:
     """The encoding of a canonical motion at 30 fps; ``contacts (F, 4)`` default to
     :func:`dance_contacts`."""
-    _check(motion)
+    C.check_motion(motion, "dance features")
     grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
     dirs = K.facing_directions(gpos, *FACING_JOINTS, smooth=FACING_SMOOTH)
     face = K.facing_rotations(dirs)

@@ -55,15 +55,6 @@ TURN = POSITION_CHANNELS + 2
 CONTACTS = slice(POSITION_CHANNELS + ROOT_CHANNELS, CHANNELS)
 
 
-def _check(motion: Motion) -> None:
-    if motion.skeleton.names != C.JOINTS or abs(motion.fps - FPS) > 1e-3:
-        raise MotionError(
-            f"fast features need a canonical motion at {FPS:g} fps, got "
-            f"{motion.skeleton.num_joints} joints at {motion.fps:g} fps",
-            kind="unusable",
-        )
-
-
 @dataclass(frozen=True)
 class Encoded:
     """``features (F, CHANNELS)`` float32 and what decoding needs to land where the clip
@@ -99,7 +90,7 @@ def encode_positions(gpos: np.ndarray, fps: float = FPS) -> Encoded:
 
 def encode(motion: Motion) -> Encoded:
     """The encoding of a canonical motion at 30 fps (one forward-kinematics pass)."""
-    _check(motion)
+    C.check_motion(motion, "fast features")
     return encode_positions(K.global_positions(motion), motion.fps)
 
 

@@ -82,15 +82,6 @@ _OBSERVED_2D[[HIPS, *STYLE2D_JOINTS]] = True
 KINDS = ("content", "style3d", "style2d")
 
 
-def _check(motion: Motion) -> None:
-    if motion.skeleton.num_joints != len(C.JOINTS) or abs(motion.fps - FPS) > 1e-3:
-        raise MotionError(
-            f"translator features need a canonical motion at {FPS:g} fps "
-            f"({len(C.JOINTS)} joints), got {motion.skeleton.num_joints} joints at {motion.fps:g}",
-            kind="unusable",
-        )
-
-
 def facing(gpos: np.ndarray) -> np.ndarray:
     """Per-frame facing rotations about +Y ``(F, 4)`` from global positions ``(F, 22, 3)``
     (hips and shoulders, smoothed over ``FACING_SMOOTH`` frames)."""
@@ -114,7 +105,7 @@ class Encoded:
 
 def encode(motion: Motion) -> Encoded:
     """Content and 3D style features of a canonical motion at 30 fps (one FK pass)."""
-    _check(motion)
+    C.check_motion(motion, "translator features")
     grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
     face = facing(gpos)
     lrot = motion.lrot[:, BODY].copy()
@@ -223,7 +214,7 @@ def decode_motion(output: np.ndarray, content: Motion, face: np.ndarray | None =
     the content's facing rotations (recomputed when None). The content's joint_Root
     rotation and all translations are kept.
     """
-    _check(content)
+    C.check_motion(content, "translator features")
     if len(output) != content.num_frames:
         raise MotionError(f"output has {len(output)} frames, content {content.num_frames}")
     if face is None:
@@ -308,7 +299,7 @@ def pad_frames(x: np.ndarray, multiple: int) -> np.ndarray:
 def velocity_factor(motion: Motion) -> float:
     """The paper's velocity factor (eq. 2): the temporal mean of the largest joint speed in
     the root-local frame, in skeleton units per second."""
-    _check(motion)
+    C.check_motion(motion, "translator features")
     return encoded_velocity_factor(encode(motion), motion.fps)
 
 
