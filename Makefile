@@ -107,12 +107,15 @@ eval-translator: $(VENV)/.dev
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
 # BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the
-# translator pipeline, dance generation for a 3-minute song, and the loopback load test.
-# Not part of `make test`.
+# translator pipeline, dance generation for a 3-minute song, the translator and dance
+# networks in onnxruntime vs torch eager, end-to-end HTTP latency (240/960/3,840 frames, cost
+# vs length, throughput at 1-8 clients) and the loopback load test. Not part of `make test`.
 .PHONY: bench
 bench: $(VENV)/.dev
 	$(PY) -m bench.bench_motion
 	$(PY) -m bench.bench_fast
 	$(PY) -m bench.bench_translator
 	$(PY) -m bench.bench_dance
+	$(PY) -m bench.bench_networks
+	$(PY) -m bench.bench_http
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
