@@ -39,6 +39,10 @@ from service.metrics import StageTimer
 BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
 NEAREST = 5  # named styles listed by nearest()
+# Codes from a clip or a video are scaled down to this multiple of the largest named style
+# code's norm: Bandai clips' own codes reach 1.2x it, real-video keypoints give 3-6x, and
+# the decoder, which never saw such codes, then throws the body about.
+CODE_NORM_LIMIT = 1.25
 
 
 class InvalidStyle(ServiceError):
@@ -126,6 +130,7 @@ class TranslatorEngine(Engine):
         self.velocity = [float(v) for v in table["velocity"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
         self.style_dim = int(self.codes.shape[1])
+        self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
         self.min_frames = padded_length(1, int(extra.get("receptive_field", BUCKET)))
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
@@ -159,7 +164,7 @@ class TranslatorEngine(Engine):
             velocity = Fe.encoded_velocity_factor(enc, canon.fps)
         with timer.stage("style_encode"):
             code = self._style_net("style3d", "style3d", enc.style3d)
-        return StyleCode(code, velocity, "style")
+        return self._bounded(StyleCode(code, velocity, "style"))
 
     def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
         """The 2D style code of a video's keypoints (resampled to 30 fps); no velocity
@@ -169,7 +174,20 @@ class TranslatorEngine(Engine):
             features = Fe.style2d_from_keypoints(kp)
         with timer.stage("style_encode"):
             code = self._style_net("style2d", "style2d", features)
-        return StyleCode(code, None, "keypoints")
+        return self._bounded(StyleCode(code, None, "keypoints"))
+
+    def _bounded(self, style: StyleCode) -> StyleCode:
+        """``style`` with its code scaled down to ``max_code_norm`` (and a warning) when
+        it lies beyond every style the decoder learned."""
+        norm = float(np.linalg.norm(style.code))
+        if norm <= self.max_code_norm:
+            return style
+        scaled = (style.code * np.float32(self.max_code_norm / norm)).astype(np.float32)
+        style.warnings.append(
+            f"the {style.source}'s style code (norm {norm:.1f}) lies far outside the learned "
+            f"styles (up to {self.max_code_norm:.1f}): scaled down to that norm"
+        )
+        return StyleCode(scaled, style.velocity, style.source, style.warnings)
 
     def require_style(self, name: str) -> int:
         """The table row of style ``name``; 404 problem listing the known styles if none."""

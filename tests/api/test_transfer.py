@@ -16,6 +16,7 @@ from motion import features as Fe
 from service.config import Settings
 from service.engines.translator import (
     BUCKET,
+    CODE_NORM_LIMIT,
     MAX_WARP,
     MIN_WARP,
     InvalidStyle,
@@ -272,6 +273,18 @@ def test_style_code_of_keypoints(shared_client, treadmill_zip):
     body = response.json()
     assert len(body["code"]) == ENTRY["extra"]["style_dim"] and body["velocity_factor"] is None
     assert {n["style"] for n in body["nearest"]} <= set(STYLES)
+    # a real video's code lies far beyond the learned styles: bounded, and the client told
+    table = np.asarray([s["code"] for s in ENTRY["extra"]["styles"].values()])
+    limit = CODE_NORM_LIMIT * np.linalg.norm(table, axis=1).max()
+    assert np.linalg.norm(body["code"]) <= limit * (1 + 1e-4)
+    assert any("outside the learned styles" in w for w in body["warnings"])
+
+
+@needs_model
+def test_codes_within_the_learned_styles_are_not_bounded(shared_client, walk):
+    r = shared_client.post("/v1/style-code", files={"style": ("w.bvh", walk, "text/plain")})
+    assert r.status_code == 200, r.text
+    assert not any("outside the learned styles" in w for w in r.json()["warnings"])
 
 
 HELD_OUT = (  # short held-out takes of the shipped split: the style is in the nearest 3
