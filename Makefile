@@ -66,12 +66,13 @@ export-fast: $(VENV)/.dev
 	$(PY) -m model_export.fast
 
 # Style and content recognition and foot skating of the shipped fast networks on their
-# held-out takes, beside the baselines (training/eval_style.py); eval-styles runs both families.
+# held-out takes, beside the baselines (training/eval_style.py); eval-styles judges both
+# families side by side on the same takes (those held out from the translator's training).
 eval-fast: $(VENV)/.dev
 	$(PY) -m training.eval_style fast --json runs/eval/fast.json
 
 eval-styles: $(VENV)/.dev
-	$(PY) -m training.eval_style all --json runs/eval/styles.json
+	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast

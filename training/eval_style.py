@@ -118,7 +118,13 @@ def load_engine(family: str):
     return engine, entry, settings.models_dir
 
 
-def held_out_takes(family: str, entry, models_dir: Path) -> set[str]:
+def held_out_takes(family: str) -> set[str]:
+    """The Bandai takes the shipped ``family``'s training never saw (its ``split.json``)."""
+    from service.config import Settings
+    from service.manifest import load_manifest
+
+    models_dir = Settings().models_dir
+    entry = next(m for m in load_manifest(models_dir).models if m.family == family)
     split = next(f.path for f in entry.files if f.path.endswith("split.json"))
     data = json.loads((models_dir / split).read_text())
     return set(data.get("val_takes") or data["validation_takes"])
@@ -171,11 +177,14 @@ def halves(motion: Motion) -> tuple[Motion, Motion]:
     return motion.slice(0, mid), motion.slice(mid, motion.num_frames)
 
 
-def evaluate(family: str, limit: int | None = None, log=print) -> dict:
+def evaluate(family: str, takes_of: str | None = None, limit: int | None = None, log=print) -> dict:
+    """The report of ``family`` on the held-out takes of ``takes_of`` (default its own)."""
     from training.data import load_bandai
 
-    engine, entry, models_dir = load_engine(family)
-    held = held_out_takes(family, entry, models_dir)
+    engine, entry, _ = load_engine(family)
+    takes_of = takes_of or family
+    held = held_out_takes(takes_of)
+    own = held_out_takes(family)
     styles = style_names(family, engine)
     clips = load_bandai()
     held_list = [c for c in clips if c.take in held]
@@ -227,6 +236,8 @@ def evaluate(family: str, limit: int | None = None, log=print) -> dict:
         "family": family,
         "model": f"{entry.name} {entry.version}",
         "held_out_takes": len(test),
+        "takes_of": takes_of,
+        "takes_unseen_by_family": sum(x.take in own for x in test),
         "styles": len(styles),
         "chance_style": round(1 / len(styles), 4),
         "chance_content": round(1 / len({c.content for c in held_list}), 4),
@@ -238,8 +249,10 @@ def evaluate(family: str, limit: int | None = None, log=print) -> dict:
 
 def markdown(report: dict) -> str:
     lines = [
-        f"**{report['family']}** ({report['model']}): {report['held_out_takes']} held-out takes "
-        f"x {report['styles']} styles; chance: style {report['chance_style']:.0%}, "
+        f"**{report['family']}** ({report['model']}): {report['held_out_takes']} takes held out "
+        f"from the {report['takes_of']}'s training ({report['takes_unseen_by_family']} unseen "
+        f"by the {report['family']}) x {report['styles']} styles; chance: style "
+        f"{report['chance_style']:.0%}, "
         f"content {report['chance_content']:.0%}",
         "",
         "| output | n | style accuracy | content accuracy | foot skating (cm/s) |",
@@ -259,9 +272,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("family", choices=(*FAMILIES, "all"))
     p.add_argument("--json", type=Path, default=None, help="write the reports here")
     p.add_argument("--limit", type=int, default=None, help="only the first N held-out takes")
+    p.add_argument(
+        "--takes",
+        choices=FAMILIES,
+        default=None,
+        help="judge on this family's held-out takes (default: each family's own); the "
+        "side-by-side comparison judges both on the same takes",
+    )
     args = p.parse_args(argv)
     families = FAMILIES if args.family == "all" else (args.family,)
-    reports = [evaluate(f, args.limit) for f in families]
+    reports = [evaluate(f, args.takes, args.limit) for f in families]
     for r in reports:
         print()
         print(markdown(r))
