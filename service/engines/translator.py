@@ -183,8 +183,9 @@ class TranslatorEngine(Engine):
         if norm <= self.max_code_norm:
             return style
         scaled = (style.code * np.float32(self.max_code_norm / norm)).astype(np.float32)
+        what = {"style": "style clip", "keypoints": "video keypoints"}.get(style.source, "input")
         style.warnings.append(
-            f"the {style.source}'s style code (norm {norm:.1f}) lies far outside the learned "
+            f"the style code of the {what} (norm {norm:.1f}) lies far outside the learned "
             f"styles (up to {self.max_code_norm:.1f}): scaled down to that norm"
         )
         return StyleCode(scaled, style.velocity, style.source, style.warnings)
