@@ -48,3 +48,12 @@ def make_client() -> Iterator[Callable[..., TestClient]]:
 def client(make_client: Callable[..., TestClient]) -> TestClient:
     """The app as shipped: settings from the environment, the repository's ``models/``."""
     return make_client()
+
+
+@pytest.fixture(scope="module")
+def shared_client() -> Iterator[TestClient]:
+    """The app as shipped, one per test module (its graphs load and warm once)."""
+    app = create_app()
+    with TestClient(app) as client:
+        assert app.state.registry.wait(120)
+        yield client

@@ -32,20 +32,11 @@ FROZEN, SLOW = 2.0, 10.0  # cm/s of the body's own motion in a window
 
 
 @pytest.fixture(scope="module")
-def shipped(request):
-    import warnings
-
-    from service.main import create_app
-
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
-        from fastapi.testclient import TestClient
-
-    app = create_app(Settings())
-    with TestClient(app) as client:
-        assert app.state.registry.wait(120)
-        assert app.state.registry.ready, app.state.registry.reasons()
-        yield client
+def shipped(shared_client):
+    """The shipped app, every model loaded."""
+    registry = shared_client.app.state.registry
+    assert registry.ready, registry.reasons()
+    return shared_client
 
 
 def window_speeds(motion) -> np.ndarray:

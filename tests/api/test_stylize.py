@@ -57,23 +57,6 @@ def walk() -> bytes:
     return Path(FIXTURE).read_bytes()
 
 
-@pytest.fixture(scope="module")
-def shared_client():
-    """One app for the module (loading 20 graphs once keeps the tests fast)."""
-    import warnings
-
-    from service.main import create_app
-
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
-        from fastapi.testclient import TestClient
-
-    app = create_app()
-    with TestClient(app) as client:
-        assert app.state.registry.wait(120)
-        yield client
-
-
 def test_styles_are_listed(shared_client):
     body = shared_client.get("/v1/styles").json()
     fast = {s["name"]: s for s in body["fast"]}

@@ -71,23 +71,6 @@ def treadmill_zip() -> bytes:
     return buf.getvalue()
 
 
-@pytest.fixture(scope="module")
-def shared_client():
-    """One app for the module (the four graphs load and warm once)."""
-    import warnings
-
-    from service.main import create_app
-
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
-        from fastapi.testclient import TestClient
-
-    app = create_app()
-    with TestClient(app) as client:
-        assert app.state.registry.wait(120)
-        yield client
-
-
 def transfer(client, content: bytes, query: str = "", files=None, **fields):
     parts = {"content": ("content.bvh", content, "text/plain"), **(files or {})}
     return client.post("/v1/transfer" + query, files=parts, data=fields)
