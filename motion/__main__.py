@@ -53,6 +53,7 @@ def cmd_info(args: argparse.Namespace) -> dict:
         missing=[j for j in C.JOINTS[1:] if j not in rig.mapping],
         unmapped=rig.unmapped,
         reference_pose=rig.reference,
+        up_axis=rig.up_axis,
         leg_length=round(rig.leg_length, 4),
     )
     return out

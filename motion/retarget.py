@@ -23,7 +23,7 @@ mapping. Unmapped joints keep their own motion on the way back.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -313,6 +313,14 @@ class Rig:
     reference_lrot: np.ndarray  # (J, 4) local rotations of the reference pose
     leg_length: float  # hip-to-ankle along the bones
     reference: str  # "rest", "registered" or "frame <i>"
+    up: np.ndarray = field(default_factory=lambda: rot.IDENTITY.copy())  # file's world -> Y-up
+
+    @property
+    def up_axis(self) -> str:
+        """The file's up axis: ``"Y"``, or ``"Z"`` etc. for a file turned upright on the way in."""
+        axis = rot.apply(rot.inv(self.up), np.array([0.0, 1.0, 0.0]))
+        i = int(np.argmax(np.abs(axis)))
+        return ("-" if axis[i] < 0 else "") + "XYZ"[i]
 
     @property
     def unmapped(self) -> list[str]:
@@ -387,7 +395,37 @@ def make_rig(
     for s in ("L", "R"):
         path = _chain(skeleton.parents, m[f"UpperLeg_{s}"], m[f"Foot_{s}"])
         leg += sum(np.linalg.norm(skeleton.offsets[k]) for k in path) / 2.0
-    return Rig(skeleton, m, tpose, reference_lrot, max(float(leg), 1e-9), how)
+    up = _upright(skeleton, m, motion)
+    return Rig(skeleton, m, tpose, reference_lrot, max(float(leg), 1e-9), how, up)
+
+
+def _upright(skeleton: Skeleton, m: dict[str, int], motion: Motion | None) -> np.ndarray:
+    """Rotation taking the file's world to Y-up: identity unless the rest pose stands along
+    another axis (Z-up exports of 3ds Max and Blender) and the motion stands along it too.
+    Both must agree: Bandai's rest pose lies along X in a Y-up world, and a Y-up clip of
+    someone lying down stands along no axis in its rest pose's direction."""
+    rest = skeleton.rest_positions()
+    spine = rest[m["Chest"]] - rest[m["Hips"]]
+    length = np.linalg.norm(spine)
+    if length < 1e-9:
+        return rot.IDENTITY.copy()
+    spine = spine / length
+    i = int(np.argmax(np.abs(spine)))
+    if i == 1 or abs(spine[i]) < 0.9:
+        return rot.IDENTITY.copy()
+    axis = np.zeros(3)
+    axis[i] = np.sign(spine[i])
+    if motion is None:
+        if not _rest_is_usable(skeleton, m):
+            return rot.IDENTITY.copy()
+    else:
+        step = max(1, motion.num_frames // 200)
+        gpos = K.fk(motion.lrot[::step], motion.lpos[::step], skeleton.parents)[1]
+        ups = gpos[:, m["Chest"]] - gpos[:, m["Hips"]]
+        ups /= np.maximum(np.linalg.norm(ups, axis=-1, keepdims=True), 1e-9)
+        if float(np.mean(ups @ axis)) < 0.7:
+            return rot.IDENTITY.copy()
+    return rot.between(axis, np.array([0.0, 1.0, 0.0]))
 
 
 _TIP_TEMPLATES = {
@@ -454,6 +492,9 @@ def to_canonical(motion: Motion, rig: Rig | None = None, fps: float | None = C.F
     """The motion on the canonical skeleton (at ``fps``; ``None`` keeps the clip's rate)."""
     rig = rig or make_rig(motion.skeleton, motion)
     grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
+    # the T-pose rotations do not depend on the world's orientation, so turning a Z-up
+    # world upright is one rotation of every global
+    grot, gpos = rot.mul(rig.up, grot), rot.apply(rig.up, gpos)
     frames = motion.num_frames
     cgrot = rot.identity((frames, len(C.JOINTS)))
     for ci, cname in enumerate(C.JOINTS):
@@ -496,6 +537,10 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
         own_lrot = np.repeat(rig.reference_lrot[None], frames, axis=0)
         own_lpos = np.repeat(sk.offsets[None], frames, axis=0)
         own_lpos[:, 0] = 0.0
+    roots = sk.parents < 0
+    own_lrot, own_lpos = own_lrot.copy(), own_lpos.copy()
+    own_lrot[:, roots] = rot.mul(rig.up, own_lrot[:, roots])  # into the upright world
+    own_lpos[:, roots] = rot.apply(rig.up, own_lpos[:, roots])
     by_joint = {v: k for k, v in rig.mapping.items()}
     grot = np.empty((frames, sk.num_joints, 4))
     gpos = np.empty((frames, sk.num_joints, 3))
@@ -517,6 +562,9 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
                 hips_world if p < 0 else rot.apply(rot.inv(grot[:, p]), hips_world - gpos[:, p])
             )
         gpos[:, j] = lpos[:, j] if p < 0 else gpos[:, p] + rot.apply(grot[:, p], lpos[:, j])
+    back = rot.inv(rig.up)  # and back into the file's world
+    lrot[:, roots] = rot.mul(back, lrot[:, roots])
+    lpos[:, roots] = rot.apply(back, lpos[:, roots])
     return Motion(sk, canon.fps, rot.make_continuous(lrot), lpos)
 
 

@@ -163,6 +163,19 @@ def scaled(motion: Motion, factor: float) -> Motion:
     return Motion(new_sk, motion.fps, motion.lrot, motion.lpos * factor)
 
 
+def z_up(motion: Motion) -> Motion:
+    """The same performance in a Z-up world (3ds Max, Blender): rest pose and motion turned
+    +90 degrees about X, every local frame with them, so the file stands along Z."""
+    q = rot.from_rotvec(np.array([np.pi / 2, 0.0, 0.0]))
+    sk = motion.skeleton
+    end_sites = {
+        j: tuple(tuple(rot.apply(q, np.array(o))) for o in offs) for j, offs in sk.end_sites.items()
+    }
+    new_sk = Skeleton(sk.names, sk.parents, rot.apply(q, sk.offsets), sk.channels, end_sites)
+    lrot = rot.mul(q, rot.mul(motion.lrot, rot.inv(q)))
+    return Motion(new_sk, motion.fps, lrot, rot.apply(q, motion.lpos))
+
+
 def variants(motion: Motion) -> dict[str, Motion]:
     """Every exporter-style presentation of ``motion`` the tests run through."""
     return {
@@ -174,4 +187,5 @@ def variants(motion: Motion) -> dict[str, Motion]:
         ),
         "blender_apose": renamed(a_pose(motion), CMU_TO_BLENDER),
         "maya_random_frames_cm": scaled(random_frames(motion, 7), 5.6),
+        "max_biped_z_up": z_up(renamed(motion, CMU_TO_BIPED)),
     }

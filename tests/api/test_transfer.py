@@ -13,6 +13,7 @@ import pytest
 
 from motion import bvh, retarget
 from motion import features as Fe
+from motion import kinematics as K
 from service.config import Settings
 from service.engines.translator import (
     BUCKET,
@@ -24,6 +25,7 @@ from service.engines.translator import (
     padded_length,
     parse_mix,
 )
+from tests import rigs
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
 from tests.rigs import FIXTURE
@@ -223,6 +225,18 @@ def test_strength_zero_ignores_the_style(shared_client, walk):
         assert r.status_code == 200, r.text
     assert a.text == b.text
     assert a.text != c.text
+
+
+@needs_model
+def test_a_z_up_file_is_styled_as_its_y_up_twin(shared_client, walk):
+    """A 3ds Max style Z-up export gets the Y-up file's result, in its own Z-up world."""
+    z_up = bvh.dumps(rigs.z_up(bvh.loads(walk))).encode()
+    a = transfer(shared_client, walk, style_name=STYLES[0])
+    b = transfer(shared_client, z_up, style_name=STYLES[0])
+    out_y = K.global_positions(assert_transfer_ok(a, walk))
+    out_z = K.global_positions(assert_transfer_ok(b, z_up))
+    turned = np.stack([out_z[..., 0], out_z[..., 2], -out_z[..., 1]], axis=-1)  # back to Y-up
+    assert np.abs(turned - out_y).max() < 0.05  # cm: BVH text rounding
 
 
 @needs_model

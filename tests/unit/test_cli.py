@@ -29,6 +29,7 @@ def test_info_reports_mapping_and_unmapped_joints():
     assert info["frames"] == 60 and abs(info["fps"] - 30) < 1e-3 and info["mappable"]
     assert info["mapping"]["UpperLeg_L"] == "LeftUpLeg" and info["mapping"]["Chest"] == "Spine1"
     assert "LThumb" in info["unmapped"] and info["missing"] == []
+    assert info["up_axis"] == "Y" and info["reference_pose"] == "rest"
 
 
 def test_canonical_and_retarget_write_valid_bvh(tmp_path):

@@ -9,6 +9,7 @@ from motion import bvh
 from motion import canonical as C
 from motion import kinematics as K
 from motion import retarget as RT
+from motion import rotations as rot
 from motion.errors import MotionError
 from tests import rigs
 from tests.conftest import data_path
@@ -33,6 +34,7 @@ def mapped_positions(motion, rig):
 def test_every_shared_skeleton_maps_fully(parts):
     m = bvh.load(data_path(*parts))
     rig = RT.make_rig(m.skeleton, m)
+    assert rig.up_axis == "Y"  # Bandai's rest pose lies along X, yet its world is Y-up
     expected = set(C.JOINTS) - {"joint_Root"}
     if parts[0] not in HAS_TOES:
         expected -= {"Toes_L", "Toes_R"}  # the DAZ layout has no toe joints
@@ -174,3 +176,34 @@ def test_canonical_skeleton_is_a_tpose_facing_z():
     assert abs(min(rest[i["Toes_L"], 1], rest[i["Toes_R"], 1])) < 1e-6  # toes on the floor
     assert RT.make_rig(C.SKELETON).reference == "rest"
     assert np.allclose(np.abs(RT.make_rig(C.SKELETON).tpose[1:, 3]), 1.0, atol=1e-9)
+
+
+def test_z_up_files_are_turned_upright_and_back():
+    y_up = rigs.load_fixture()
+    z_up = rigs.z_up(y_up)
+    rig = RT.make_rig(z_up.skeleton, z_up)
+    assert rig.up_axis == "Z" and rig.reference == "rest"
+    assert RT.make_rig(y_up.skeleton, y_up).up_axis == "Y"
+    # the canonical motion is the Y-up file's, hips trajectory included
+    a = K.global_positions(RT.to_canonical(y_up))
+    b = K.global_positions(RT.to_canonical(z_up, rig))
+    assert np.abs(a - b).max() < 1e-6 * 175
+    # back onto the Z-up skeleton: the file's own world, with and without the clip
+    back = RT.from_canonical(RT.to_canonical(z_up, rig, fps=None), rig, like=z_up)
+    assert np.abs(K.global_positions(back) - K.global_positions(z_up)).max() < 1e-6 * 175
+    pose = K.global_positions(RT.from_canonical(RT.to_canonical(z_up, rig), rig))
+    spine = pose[:, rig.mapping["Chest"]] - pose[:, rig.mapping["Hips"]]
+    assert np.all(spine[:, 2] > 0.9 * np.linalg.norm(spine, axis=-1))
+
+
+def test_upright_needs_the_rest_pose_and_the_motion_to_agree():
+    # a Y-up clip of someone lying on the floor (the root turned, the rest pose standing)
+    m = rigs.load_fixture()
+    q = rot.from_rotvec(np.array([np.pi / 2, 0.0, 0.0]))
+    lrot, lpos = m.lrot.copy(), m.lpos.copy()
+    lrot[:, 0] = rot.mul(q, lrot[:, 0])
+    lpos[:, 0] = rot.apply(q, lpos[:, 0])
+    lying = m.replace(lrot=lrot, lpos=lpos)
+    assert RT.make_rig(lying.skeleton, lying).up_axis == "Y"
+    # a Z-up skeleton without a clip: its standing rest pose decides
+    assert RT.make_rig(rigs.z_up(m).skeleton).up_axis == "Z"
