@@ -40,8 +40,9 @@ BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
 NEAREST = 5  # named styles listed by nearest()
 # Codes from a clip or a video are scaled down to this multiple of the largest named style
-# code's norm: Bandai clips' own codes reach 1.2x it, real-video keypoints give 3-6x, and
-# the decoder, which never saw such codes, then throws the body about.
+# code's norm: Bandai clips' own codes reach 1.2x it, and the decoder, which never saw
+# larger codes, then throws the body about. Real-video walks code at 0.4-0.6x; a video of
+# someone collapsing at 2x.
 CODE_NORM_LIMIT = 1.25
 
 

@@ -145,8 +145,8 @@ def test_real_multi_person_frames_follow_the_walker(folder_27: Keypoints2D) -> N
         kp = folder_27 if folder.endswith("27") else keypoints.load(files[0].parent)
         for i in multi:
             walker = np.array(docs[i]["people"][0]["pose_keypoints_2d"]).reshape(25, 3)
-            assert kp.positions[i, J["Hips"], 0] == pytest.approx(walker[8, 0])
-            assert kp.positions[i, J["Hips"], 1] == pytest.approx(-walker[8, 1])
+            np.testing.assert_allclose(kp.positions[i, J["UpperLeg_L"]], walker[12, :2] * [1, -1])
+            np.testing.assert_allclose(kp.positions[i, J["UpperArm_R"]], walker[2, :2] * [1, -1])
         # same result when the walker is listed last in every frame
         for d in docs:
             d["people"].reverse()
@@ -204,7 +204,7 @@ def test_image_size_flips_y_into_the_image() -> None:
     frames = [openpose_frame(person(BODY25, at=(300, 300 + i))) for i in range(3)]
     kp = keypoints.load(dumps(frames), image_size=(720, 720))
     assert kp.image_size == (720.0, 720.0)
-    np.testing.assert_allclose(kp.positions[:, J["Hips"], 1], [420, 419, 418])
+    np.testing.assert_allclose(kp.positions[:, J["UpperLeg_L"], 1], [420, 419, 418])
 
 
 # --- layouts -----------------------------------------------------------------------------
@@ -217,10 +217,19 @@ def check_figure(kp: Keypoints2D, at=(300.0, 300.0), scale=1.0, height=0.0) -> N
         xy = np.mean([FIGURE[p] for p in parts], axis=0) * scale + np.asarray(at)
         return np.array([xy[0], height - xy[1]])
 
+    hip_joints, shoulders = expect("l_hip", "r_hip"), expect("l_shoulder", "r_shoulder")
+    torso = shoulders - hip_joints
+    centres = {  # the canonical joints sit above the detector's hip joints and shoulders
+        "Hips": hip_joints + keypoints.HIPS_ABOVE_HIP_JOINTS * torso,
+        "Neck": shoulders + keypoints.NECK_ABOVE_SHOULDERS * torso,
+    }
+    head = expect("l_ear", "r_ear") - shoulders
+    centres["Head"] = centres["Neck"] + keypoints.HEAD_FROM_NECK * np.linalg.norm(
+        torso
+    ) * head / np.linalg.norm(head)
+    for joint, xy in centres.items():
+        np.testing.assert_allclose(kp.positions[0, J[joint]], xy, err_msg=joint)
     table = {
-        "Hips": ("l_hip", "r_hip"),
-        "Neck": ("l_shoulder", "r_shoulder"),
-        "Head": ("l_ear", "r_ear"),
         "UpperArm_L": ("l_shoulder",),
         "LowerArm_L": ("l_elbow",),
         "Hand_L": ("l_wrist",),
@@ -336,10 +345,14 @@ def test_never_seen_joints_are_derived_with_zero_confidence() -> None:
     for joint in ("Hand_L", "LowerArm_L", "UpperLeg_R"):
         assert (kp.confidence[:, J[joint]] == 0).all(), joint
     pos = kp.positions[0]
-    # the missing hip mirrors the seen one through the mid-hip (here: the one hip seen)
-    np.testing.assert_allclose(pos[J["UpperLeg_R"]], 2 * pos[J["Hips"]] - pos[J["UpperLeg_L"]])
+    # the missing hip mirrors the seen one through the detector's mid-hip, here the one hip
+    # seen (the canonical Hips then sit above it)
+    np.testing.assert_allclose(pos[J["UpperLeg_R"]], pos[J["UpperLeg_L"]])
+    assert pos[J["Hips"], 1] > pos[J["UpperLeg_L"], 1]
     assert pos[J["Hand_L"], 1] < pos[J["LowerArm_L"], 1] < pos[J["UpperArm_L"], 1]
-    np.testing.assert_allclose(pos[J["Head"]], [300, -(300 - 135)])  # mid of the eyes
+    # the head points from the shoulders to the mid of the eyes, at the canonical distance
+    head = pos[J["Head"]] - pos[J["Neck"]]
+    assert head[0] == pytest.approx(0.0) and head[1] > 0
 
 
 def test_file_number_gap_is_a_missing_frame() -> None:
@@ -491,3 +504,21 @@ def test_fuzzed_bytes_only_ever_raise_motion_error(blob: bytes) -> None:
     for data in (blob, b"PK\x03\x04" + blob):
         with pytest.raises(MotionError):
             keypoints.load(data)
+
+
+def test_joint_centre_offsets_are_the_canonical_skeletons():
+    from motion import canonical as C
+
+    rest = C.SKELETON.rest_positions()
+    y = {name: rest[C.INDEX[name], 1] for name in C.JOINTS}
+    hip_joints = 0.5 * (y["UpperLeg_L"] + y["UpperLeg_R"])
+    shoulders = 0.5 * (y["UpperArm_L"] + y["UpperArm_R"])
+    torso = shoulders - hip_joints
+    head = np.linalg.norm(rest[C.INDEX["Head"]] - rest[C.INDEX["Neck"]])
+    assert keypoints.HIPS_ABOVE_HIP_JOINTS == pytest.approx(
+        (y["Hips"] - hip_joints) / torso, abs=1e-3
+    )
+    assert keypoints.NECK_ABOVE_SHOULDERS == pytest.approx(
+        (y["Neck"] - shoulders) / torso, abs=1e-3
+    )
+    assert keypoints.HEAD_FROM_NECK == pytest.approx(head / torso, abs=1e-3)
