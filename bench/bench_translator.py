@@ -77,7 +77,11 @@ def main(argv: list[str] | None = None) -> dict:
             clip = pipeline.load_clip(data, settings, timer)
             target = style_code(engine, settings, style, timer)
             result = engine.transfer(
-                clip.canonical, target.code, style_velocity=target.velocity, timer=timer
+                clip.canonical,
+                target.code,
+                style_velocity=target.velocity,
+                style_speed=target.speed,
+                timer=timer,
             )
             out = finish_transfer(clip, result, settings, timer, target.warnings)
             return time.perf_counter() - started, dict(timer.ms), out.frames

@@ -14,12 +14,14 @@ few minutes). Writes ``models/translator/``:
 - ``stats.npz``: the checkpoint's feature statistics (``motion.features.save_stats``);
 - ``styles.npz``: per style name (``names``) the mean 3D style code of its training clips
   (``codes (N, S)``; whole clips padded to the stride, the checkpoint's validation takes left
-  out), the clip count (``clips``) and the mean velocity factor of those clips
-  (``velocity``, ``motion.features.velocity_factor``) for the time warp of a named style;
+  out), the clip count (``clips``), the mean velocity factor of those clips (``velocity``,
+  ``motion.features.velocity_factor``) and the style's ``speed`` (:func:`style_speeds`),
+  the time warp of a named style;
 - ``split.json``: the validation takes, for the evaluation.
 
 and one manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``) whose
-``extra`` repeats the style table (codes, clip counts, velocity factors) and the step.
+``extra`` repeats the style table (codes, clip counts, velocity factors, speeds) and the
+step.
 
 The TorchScript exporter (``dynamo=False``) is used: it keeps the named time axes symbolic
 and the graphs need nothing it lacks (convolutions, instance norm, nearest resize, amax).
@@ -213,18 +215,46 @@ def clip_code(style3d_net, style3d: np.ndarray, stats: Fe.FeatureStats) -> np.nd
     return np.asarray(style3d_net(np.ascontiguousarray(x)))[0]
 
 
+def style_speeds(velocity: dict[tuple[str, str], list[float]]) -> dict[str, float]:
+    """How fast each style moves against the others *on the same content*: per content,
+    the log of a style's mean velocity factor minus the mean of that over the content's
+    styles; a style's speed is the exp of its mean over its contents (contents with one
+    style say nothing and are skipped; a style with none gets 1).
+
+    A style's plain mean velocity factor mixes its contents: runs are fast and bows slow,
+    so warping by it slowed every run and sped up every bow, whatever the style.
+    ``velocity``: ``(content, style) -> velocity factors``.
+    """
+    logs = {k: float(np.log(np.mean(v))) for k, v in velocity.items() if np.mean(v) > 1e-6}
+    by_content: dict[str, dict[str, float]] = {}
+    for (content, style), value in logs.items():
+        by_content.setdefault(content, {})[style] = value
+    offsets: dict[str, list[float]] = {}
+    for per_style in by_content.values():
+        if len(per_style) < 2:
+            continue
+        mean = float(np.mean(list(per_style.values())))
+        for style, value in per_style.items():
+            offsets.setdefault(style, []).append(value - mean)
+    styles = {style for _, style in velocity}
+    return {s: float(np.exp(np.mean(offsets[s]))) if s in offsets else 1.0 for s in styles}
+
+
 def style_table(
     style3d_net, stats: Fe.FeatureStats, clips: list, styles: list[str], val_takes: Iterable[str]
 ) -> dict:
-    """Mean code, clip count and mean velocity factor per style over the training clips
-    (those whose take is not in ``val_takes``), and the validation clips' nearest-style
-    accuracy (top 1 and top 3, by Euclidean distance to the means).
+    """Mean code, clip count, mean velocity factor and speed (:func:`style_speeds`) per
+    style over the training clips (those whose take is not in ``val_takes``), and the
+    validation clips' nearest-style accuracy (top 1 and top 3, by Euclidean distance to
+    the means).
 
-    ``clips``: ``training.data.Clip`` objects with ``style``, ``take`` and ``motion``.
+    ``clips``: ``training.data.Clip`` objects with ``style``, ``content``, ``take`` and
+    ``motion``.
     """
     held_out = set(val_takes)
     codes: dict[str, list[np.ndarray]] = {s: [] for s in styles}
     velocity: dict[str, list[float]] = {s: [] for s in styles}
+    by_content: dict[tuple[str, str], list[float]] = {}
     val: list[tuple[str, np.ndarray]] = []
     for clip in clips:
         if clip.style not in codes:
@@ -237,12 +267,15 @@ def style_table(
             continue
         codes[clip.style].append(code)
         velocity[clip.style].append(Fe.velocity_factor(motion))
+        by_content.setdefault((clip.content, clip.style), []).append(velocity[clip.style][-1])
     names = [s for s in styles if codes[s]]
+    speeds = style_speeds(by_content)
     table = {
         "names": names,
         "codes": np.stack([np.mean(codes[s], axis=0) for s in names]).astype(np.float32),
         "clips": np.array([len(codes[s]) for s in names], dtype=np.int64),
         "velocity": np.array([np.mean(velocity[s]) for s in names], dtype=np.float64),
+        "speed": np.array([speeds[s] for s in names], dtype=np.float64),
     }
     hits1 = hits3 = 0
     for style, code in val:
@@ -307,6 +340,7 @@ def main(argv: list[str] | None = None) -> dict:
         codes=table["codes"],
         clips=table["clips"],
         velocity=table["velocity"],
+        speed=table["speed"],
     )
     split = {"val_takes": list(meta["val_takes"]), "styles": list(meta["styles"]), "step": step}
     (out / "split.json").write_text(json.dumps(split, indent=1) + "\n")
@@ -327,6 +361,7 @@ def main(argv: list[str] | None = None) -> dict:
         name: {
             "clips": int(table["clips"][i]),
             "velocity_factor": round(float(table["velocity"][i]), 4),
+            "speed": round(float(table["speed"][i]), 4),
             "code": [round(float(v), 6) for v in table["codes"][i]],
         }
         for i, name in enumerate(table["names"])

@@ -142,7 +142,9 @@ def transfer(family: str, engine, canon: Motion, style: str) -> Motion:
 
     if family == "translator":
         target = engine.code_of_name(style)
-        return engine.transfer(canon, target.code, style_velocity=target.velocity).motion
+        return engine.transfer(
+            canon, target.code, style_velocity=target.velocity, style_speed=target.speed
+        ).motion
     return engine.stylize(canon, style, StageTimer(engine.name))
 
 

@@ -13,8 +13,11 @@ A transfer (paper section 3.4): encode the content; style code = own + strength 
 own), own being the content's 3D style code (strength 0 gives the content back, as the
 network reconstructs it); decode; the content's root trajectory (``features.decode_motion``);
 feet pinned where the CONTENT's feet are planted (``ik.pin_canonical_feet``, before the time
-warp, as the paper does); then the time warp by the ratio of velocity factors (style over
-content, to the power ``strength``), clamped to [``MIN_WARP``, ``MAX_WARP``].
+warp, as the paper does); then the time warp, to the power ``strength`` and clamped to
+[``MIN_WARP``, ``MAX_WARP``]: for a style clip the paper's ratio of velocity factors (style
+over content); for a named style or mix the style's speed against the other styles on the
+same content (``model_export.translator.style_speeds``): the ratio of a named style's mean
+velocity factor to a clip's mixes up contents and slowed every run, sped up every bow.
 """
 
 from __future__ import annotations
@@ -56,12 +59,15 @@ class InvalidStyle(ServiceError):
 @dataclass
 class StyleCode:
     """A style code ``(S,)`` float32, the velocity factor of its source (None when unknown,
-    e.g. a video: no time warp), what it came from, and warnings for the client."""
+    e.g. a video: no time warp), what it came from, warnings for the client, and for named
+    styles and mixes their ``speed`` against the other styles on the same content (the
+    time warp then, instead of the ratio of velocity factors)."""
 
     code: np.ndarray
     velocity: float | None
     source: str
     warnings: list[str] = field(default_factory=list)
+    speed: float | None = None
 
 
 @dataclass
@@ -129,6 +135,8 @@ class TranslatorEngine(Engine):
         self.codes = np.asarray(table["codes"], dtype=np.float32)
         self.clips = [int(c) for c in table["clips"]]
         self.velocity = [float(v) for v in table["velocity"]]
+        # bundles exported before speeds existed warp named styles by velocity factors
+        self.speed = [float(v) for v in table["speed"]] if "speed" in table else None
         self.index = {name: i for i, name in enumerate(self.style_names)}
         self.style_dim = int(self.codes.shape[1])
         self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
@@ -139,7 +147,12 @@ class TranslatorEngine(Engine):
 
     def styles(self) -> list[dict[str, Any]]:
         return [
-            {"name": name, "clips": self.clips[i], "velocity_factor": round(self.velocity[i], 4)}
+            {
+                "name": name,
+                "clips": self.clips[i],
+                "velocity_factor": round(self.velocity[i], 4),
+                "speed": None if self.speed is None else round(self.speed[i], 4),
+            }
             for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
         ]
 
@@ -189,7 +202,7 @@ class TranslatorEngine(Engine):
             f"the style code of the {what} (norm {norm:.1f}) lies far outside the learned "
             f"styles (up to {self.max_code_norm:.1f}): scaled down to that norm"
         )
-        return StyleCode(scaled, style.velocity, style.source, style.warnings)
+        return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
     def require_style(self, name: str) -> int:
         """The table row of style ``name``; 404 problem listing the known styles if none."""
@@ -203,11 +216,12 @@ class TranslatorEngine(Engine):
 
     def code_of_name(self, name: str) -> StyleCode:
         i = self.require_style(name)
-        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name")
+        speed = None if self.speed is None else self.speed[i]
+        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=speed)
 
     def code_of_mix(self, mix: dict[str, float]) -> StyleCode:
-        """Weighted mean of named codes (and of their velocity factors); weights >= 0 with a
-        positive sum, normalised here; unknown names 404."""
+        """Weighted mean of named codes (and of their velocity factors; geometric mean of
+        their speeds); weights >= 0 with a positive sum, normalised here; unknown names 404."""
         rows = [self.require_style(name) for name in mix]
         weights = np.array(list(mix.values()), dtype=np.float64)
         if not np.all(np.isfinite(weights)) or (weights < 0).any() or weights.sum() <= 0:
@@ -215,7 +229,10 @@ class TranslatorEngine(Engine):
         weights /= weights.sum()
         code = (weights[:, None] * self.codes[rows].astype(np.float64)).sum(axis=0)
         velocity = float(np.dot(weights, [self.velocity[i] for i in rows]))
-        return StyleCode(code.astype(np.float32), velocity, "style_mix")
+        speed = None
+        if self.speed is not None:
+            speed = float(np.exp(np.dot(weights, np.log([self.speed[i] for i in rows]))))
+        return StyleCode(code.astype(np.float32), velocity, "style_mix", speed=speed)
 
     def nearest(self, code: np.ndarray, count: int = NEAREST) -> list[dict[str, Any]]:
         """The ``count`` named styles nearest to ``code`` (Euclidean), nearest first."""
@@ -228,14 +245,23 @@ class TranslatorEngine(Engine):
     # --- transfer --------------------------------------------------------------------------
 
     def warp_factor(
-        self, style_velocity: float | None, content_velocity: float, strength: float
+        self,
+        style_velocity: float | None,
+        content_velocity: float,
+        strength: float,
+        style_speed: float | None = None,
     ) -> tuple[float, list[str]]:
-        """``(style / content) ** strength`` clamped to [MIN_WARP, MAX_WARP], and warnings."""
-        if style_velocity is None:
+        """``style_speed ** strength`` for a named style or mix, else ``(style / content) **
+        strength`` (the paper's, for a style clip); clamped to [MIN_WARP, MAX_WARP]; and
+        warnings."""
+        if style_speed is not None:
+            factor = style_speed**strength
+        elif style_velocity is None:
             return 1.0, ["the style has no velocity factor (2D keypoints): no time warp"]
-        if not (style_velocity > 1e-6 and content_velocity > 1e-6):
+        elif not (style_velocity > 1e-6 and content_velocity > 1e-6):
             return 1.0, ["a clip hardly moves (velocity factor ~0): no time warp"]
-        factor = (style_velocity / content_velocity) ** strength
+        else:
+            factor = (style_velocity / content_velocity) ** strength
         clamped = min(max(factor, MIN_WARP), MAX_WARP)
         if clamped != factor:
             return clamped, [
@@ -253,9 +279,11 @@ class TranslatorEngine(Engine):
         foot_cleanup: bool = True,
         style_velocity: float | None = None,
         timer: StageTimer | None = None,
+        style_speed: float | None = None,
     ) -> Transfer:
         """``content`` (canonical, 30 fps) in the style of ``code ``(S,)``; see the module
-        docstring. ``style_velocity`` None means no time warp (with a warning if asked)."""
+        docstring. The time warp is ``style_speed`` (named styles) or the ratio of velocity
+        factors (style clips); neither means no time warp (with a warning if asked)."""
         timer = timer or StageTimer(self.name)
         frames = content.num_frames
         with timer.stage("features"):
@@ -280,7 +308,9 @@ class TranslatorEngine(Engine):
         if time_warp:
             with timer.stage("time_warp"):
                 content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
-                factor, warnings = self.warp_factor(style_velocity, content_velocity, strength)
+                factor, warnings = self.warp_factor(
+                    style_velocity, content_velocity, strength, style_speed
+                )
                 if factor != 1.0:
                     motion = Fe.time_warp(motion, factor)
         return Transfer(motion, factor, warnings)

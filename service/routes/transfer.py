@@ -8,11 +8,13 @@ JSON document's rate, else 30),
 object style name -> weight). None or several: a 400 problem naming the fields.
 
 The result is a BVH on the content's skeleton and frame rate. With ``time_warp`` (default)
-the motion is played faster or slower by the ratio of the style's and the content's
-velocity factors (paper section 3.4; clamped to [0.5, 2], none for keypoints), so the frame
-count may change (``X-Frames`` says it): the content clip as sent is warped by the same
-factor, so that its joints without a canonical counterpart follow the new timing. Below
-full ``strength`` the factor is the ratio to the power ``strength`` (0: no warp).
+the motion is played faster or slower: for a style clip by the ratio of the style's and the
+content's velocity factors (paper section 3.4), for a named style or mix by the style's
+``speed`` (how fast it moves against the other styles on the same content, ``GET
+/v1/styles``); clamped to [0.5, 2], none for keypoints. The frame count may change
+(``X-Frames`` says it): the content clip as sent is warped by the same factor, so that its
+joints without a canonical counterpart follow the new timing. Below full ``strength`` the
+factor is raised to the power ``strength`` (0: no warp).
 """
 
 from __future__ import annotations
@@ -240,6 +242,7 @@ async def transfer(
             time_warp=time_warp,
             foot_cleanup=foot_cleanup,
             style_velocity=target.velocity,
+            style_speed=target.speed,
             timer=timer,
         )
         return finish_transfer(clip, result, settings, timer, target.warnings + result.warnings)
@@ -280,6 +283,7 @@ async def style_code_of(
         "nearest": engine.nearest(code.code),
         "source": code.source,
         "velocity_factor": None if code.velocity is None else round(code.velocity, 4),
+        "speed": None if code.speed is None else round(code.speed, 4),
         "model": {"name": engine.name, "version": engine.version},
         "timings_ms": {k: round(v, 2) for k, v in timer.ms.items()},
         "warnings": code.warnings,

@@ -107,9 +107,14 @@ def assert_transfer_ok(response, source: bytes, frames: int | None = None):
 
 
 def expected_warp(content: bytes, style_velocity: float) -> float:
+    """The paper's warp for a style clip: the ratio of velocity factors, clamped."""
     canon = retarget.to_canonical(bvh.loads(content))
     factor = style_velocity / Fe.velocity_factor(canon)
     return min(max(factor, MIN_WARP), MAX_WARP)
+
+
+def warped_frames(frames: int, factor: float) -> int:
+    return round((frames - 1) / factor) + 1
 
 
 # --------------------------------------------------------------------------- engine helpers
@@ -153,6 +158,7 @@ def test_styles_are_listed(shared_client):
     assert sorted(listed) == STYLES
     for name, info in listed.items():
         assert info["clips"] == ENTRY["extra"]["styles"][name]["clips"] > 0
+        assert info["speed"] == ENTRY["extra"]["styles"][name]["speed"] > 0
         assert info["model"] == ENTRY["name"]
 
 
@@ -173,8 +179,8 @@ def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(share
     source = bvh.loads(walk)
     name = "old" if "old" in STYLES else STYLES[0]
     out = assert_transfer_ok(transfer(shared_client, walk, style_name=name), walk)
-    factor = expected_warp(walk, ENTRY["extra"]["styles"][name]["velocity_factor"])
-    assert out.num_frames == round((source.num_frames - 1) / factor) + 1
+    factor = ENTRY["extra"]["styles"][name]["speed"]  # a named style warps by its speed
+    assert out.num_frames == warped_frames(source.num_frames, factor)
     # joints with no canonical counterpart follow the warped original
     rig = retarget.make_rig(source.skeleton, source)
     unmapped = [source.skeleton.index(n) for n in rig.unmapped]
@@ -182,6 +188,26 @@ def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(share
     warped = Fe.time_warp(source, factor, out.num_frames)
     dots = np.abs(np.sum(out.lrot[:, unmapped] * warped.lrot[:, unmapped], axis=-1))
     assert dots.min() > 1 - 1e-5
+
+
+@needs_model
+def test_named_styles_warp_by_speed_whatever_the_content(shared_client, walk):
+    """A slow style slows a run and a bow alike, and a mix warps by the weighted geometric
+    mean of its speeds (the mean velocity factor of a style's clips would slow every run
+    and speed up every bow: it mixes contents)."""
+    speeds = {name: info["speed"] for name, info in ENTRY["extra"]["styles"].items()}
+    slow, fast = min(speeds, key=speeds.get), max(speeds, key=speeds.get)
+    assert speeds[slow] < 0.9 and speeds[fast] > 1.1
+    for clip in ("dataset-1_run_normal_001", "dataset-1_bow_normal_001"):
+        content = bandai(clip)
+        frames = bvh.loads(content).num_frames
+        for name in (slow, fast):
+            out = assert_transfer_ok(transfer(shared_client, content, style_name=name), content)
+            assert out.num_frames == warped_frames(frames, speeds[name]), (clip, name)
+    mix = {slow: 0.25, fast: 0.75}
+    out = transfer(shared_client, walk, style_mix=json.dumps(mix), strength="0.5")
+    factor = (speeds[slow] ** 0.25 * speeds[fast] ** 0.75) ** 0.5
+    assert_transfer_ok(out, walk, frames=warped_frames(bvh.loads(walk).num_frames, factor))
 
 
 @needs_model

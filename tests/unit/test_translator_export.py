@@ -104,11 +104,13 @@ def test_style_table_means_training_clips_and_leaves_validation_out(tiny):
         }
     )
     clips = [
-        SimpleNamespace(style="a", take="a1", motion=canon.slice(0, 30)),
-        SimpleNamespace(style="a", take="a2", motion=canon.slice(10, 50)),
-        SimpleNamespace(style="b", take="b1", motion=canon.slice(5, 47)),
-        SimpleNamespace(style="b", take="b2", motion=canon.slice(20, 60)),  # held out
-        SimpleNamespace(style="c", take="c1", motion=canon.slice(0, 20)),  # unknown style
+        SimpleNamespace(style="a", content="walk", take="a1", motion=canon.slice(0, 30)),
+        SimpleNamespace(style="a", content="walk", take="a2", motion=canon.slice(10, 50)),
+        SimpleNamespace(style="b", content="walk", take="b1", motion=canon.slice(5, 47)),
+        SimpleNamespace(
+            style="b", content="walk", take="b2", motion=canon.slice(20, 60)
+        ),  # held out
+        SimpleNamespace(style="c", content="walk", take="c1", motion=canon.slice(0, 20)),  # unknown
     ]
     table = X.style_table(g.style3d, stats, clips, ["a", "b"], ["b2"])
     assert table["names"] == ["a", "b"]
@@ -118,7 +120,25 @@ def test_style_table_means_training_clips_and_leaves_validation_out(tiny):
     np.testing.assert_allclose(table["codes"][1], codes[2], rtol=1e-5, atol=1e-6)
     want = (Fe.velocity_factor(clips[0].motion) + Fe.velocity_factor(clips[1].motion)) / 2
     assert table["velocity"][0] == pytest.approx(want)
+    # two styles on one content: speeds are their velocity ratio, split evenly in log
+    ratio = want / Fe.velocity_factor(clips[2].motion)
+    assert table["speed"][0] == pytest.approx(ratio**0.5) and table["speed"][1] == pytest.approx(
+        ratio**-0.5
+    )
     assert table["val_clips"] == 1 and table["val_top1"] in (0.0, 1.0)
+
+
+def test_style_speeds_compare_styles_on_the_same_content():
+    # "fast" is 2x "slow" on walks and on bows; bows are 10x slower than walks; "solo"
+    # alone on its content says nothing
+    velocity = {
+        ("walk", "fast"): [200.0], ("walk", "slow"): [90.0, 110.0],
+        ("bow", "fast"): [20.0], ("bow", "slow"): [10.0],
+        ("run", "solo"): [300.0],
+    }  # fmt: skip
+    speeds = X.style_speeds(velocity)
+    assert speeds["fast"] == pytest.approx(2**0.5) and speeds["slow"] == pytest.approx(2**-0.5)
+    assert speeds["solo"] == 1.0
 
 
 # --------------------------------------------------------------------------- shipped bundle
@@ -157,6 +177,7 @@ def test_shipped_bundle_is_listed_hashed_and_small():
             np.testing.assert_allclose(info["code"], table["codes"][i], atol=1e-5)
             assert info["clips"] == int(table["clips"][i]) > 0
             assert info["velocity_factor"] == pytest.approx(float(table["velocity"][i]), abs=1e-3)
+            assert info["speed"] == pytest.approx(float(table["speed"][i]), abs=1e-3)
             assert len(info["code"]) == extra["style_dim"]
     split = json.loads((MODELS / extra["split"]).read_text())
     assert len(split["val_takes"]) == extra["validation_takes"] > 0
