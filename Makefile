@@ -68,11 +68,12 @@ export-fast: $(VENV)/.dev
 # Style and content recognition and foot skating of the shipped fast networks on their
 # held-out takes, beside the baselines (training/eval_style.py); eval-styles judges both
 # families side by side on the same takes (those held out from the translator's training).
+# Each records its figures in the model's manifest entry (metrics.evaluation).
 eval-fast: $(VENV)/.dev
-	$(PY) -m training.eval_style fast --json runs/eval/fast.json
+	$(PY) -m training.eval_style fast --json runs/eval/fast.json --manifest
 
 eval-styles: $(VENV)/.dev
-	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json
+	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json --manifest
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
@@ -104,7 +105,7 @@ export-translator: $(VENV)/.dev
 	$(PY) -m model_export.translator $(EXPORT_TRANSLATOR_ARGS)
 
 eval-translator: $(VENV)/.dev
-	$(PY) -m training.eval_style translator --json runs/eval/translator.json
+	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
 # BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the

@@ -58,12 +58,32 @@ def put_entry(
         and not (replace_prefix and str(m.get("name", "")).startswith(replace_prefix))
     ]
     models.append(model.model_dump(mode="json"))
-    doc = {"schema_version": SCHEMA_VERSION, "models": models}
+    _write(path, {"schema_version": SCHEMA_VERSION, "models": models})
+    return model
+
+
+def put_evaluation(
+    name: str, version: str, key: str, figures: dict[str, Any], models_dir: Path = MODELS_DIR
+) -> None:
+    """Record held-out evaluation ``figures`` under ``metrics.evaluation[key]`` of the entry
+    ``name``, which must still be at ``version`` (figures of another model would mislead).
+    A new export replaces the entry, and with it these figures."""
+    path = Path(models_dir) / MANIFEST_NAME
+    doc = json.loads(path.read_text())
+    entry = next((m for m in doc.get("models", []) if m.get("name") == name), None)
+    if entry is None or entry.get("version") != version:
+        found = None if entry is None else entry.get("version")
+        raise ValueError(f"manifest has {name!r} at version {found!r}, not {version!r}")
+    entry.setdefault("metrics", {}).setdefault("evaluation", {})[key] = figures
+    _write(path, doc)
+
+
+def _write(path: Path, doc: dict[str, Any]) -> None:
+    """Validate ``doc`` against the service's schema and replace ``path`` atomically."""
     Manifest.model_validate(doc)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc, indent=1) + "\n")
     os.replace(tmp, path)
-    return model
 
 
 def remove_entries(prefix: str, models_dir: Path = MODELS_DIR) -> None:
@@ -73,6 +93,4 @@ def remove_entries(prefix: str, models_dir: Path = MODELS_DIR) -> None:
         return
     doc = json.loads(path.read_text())
     doc["models"] = [m for m in doc.get("models", []) if not m["name"].startswith(prefix)]
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    os.replace(tmp, path)
+    _write(path, doc)

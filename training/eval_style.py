@@ -392,6 +392,8 @@ def evaluate(
     return {
         "family": family,
         "model": f"{entry.name} {entry.version}",
+        "model_name": entry.name,
+        "model_version": entry.version,
         "held_out_takes": len(test),
         "takes_of": takes_of,
         "takes_unseen_by_family": sum(x.take in own for x in test),
@@ -452,6 +454,12 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="train the style classifier without the mirror images of the held-out takes",
     )
+    p.add_argument(
+        "--manifest",
+        action="store_true",
+        help="also record each report's figures in the model's manifest entry "
+        "(metrics.evaluation.<takes>_held_out_takes), so they travel with the model",
+    )
     args = p.parse_args(argv)
     families = FAMILIES if args.family == "all" else (args.family,)
     reports = [evaluate(f, args.takes, args.limit, mirror=not args.no_mirror) for f in families]
@@ -461,7 +469,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(reports, indent=1))
+    if args.manifest:
+        for r in reports:
+            record_in_manifest(r)
     return 0
+
+
+def record_in_manifest(report: dict, models_dir: Path | None = None) -> None:
+    """The report's table (rows, takes, date) into its model's manifest entry."""
+    from model_export.manifest import put_evaluation
+    from service.config import Settings
+
+    figures = {
+        "held_out_takes": report["held_out_takes"],
+        "styles": report["styles"],
+        "rows": report["rows"],
+        "measured": time.strftime("%Y-%m-%d"),
+        "by": "python -m training.eval_style (style: convolutional classifier; style_linear, "
+        "content: logistic regression; foot skating in cm/s)",
+    }
+    put_evaluation(
+        report["model_name"],
+        report["model_version"],
+        f"{report['takes_of']}_held_out_takes",
+        figures,
+        models_dir or Settings().models_dir,
+    )
 
 
 if __name__ == "__main__":

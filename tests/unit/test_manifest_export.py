@@ -1,0 +1,62 @@
+"""``model_export.manifest``: entries are hashed and validated; evaluation figures land in
+the entry of the model they were measured on, and only if it is still that model."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from model_export import manifest as MF
+from service.manifest import load_manifest, sha256_of
+
+
+def entry(version: str) -> dict:
+    return {
+        "name": "translator-test",
+        "family": "translator",
+        "version": version,
+        "files": ["translator/weights.bin"],
+        "graphs": {"decoder": MF.graph_spec("translator/weights.bin", 17, [], [])},
+        "licence": "test",
+        "metrics": {"rec_pos_cm": 3.2},
+    }
+
+
+@pytest.fixture()
+def models(tmp_path):
+    (tmp_path / "translator").mkdir()
+    (tmp_path / "translator" / "weights.bin").write_bytes(b"weights")
+    MF.put_entry(entry("1"), tmp_path)
+    return tmp_path
+
+
+def test_entries_are_hashed(models):
+    (model,) = load_manifest(models).models
+    assert model.files[0].sha256 == sha256_of(models / "translator" / "weights.bin")
+
+
+def test_evaluation_is_recorded_beside_the_training_metrics(models):
+    figures = {"rows": {"translator": {"style_accuracy": 0.379}}}
+    MF.put_evaluation("translator-test", "1", "translator_held_out_takes", figures, models)
+    MF.put_evaluation("translator-test", "1", "fast_held_out_takes", {"rows": {}}, models)
+    (model,) = load_manifest(models).models
+    assert model.metrics["rec_pos_cm"] == 3.2
+    assert model.metrics["evaluation"]["translator_held_out_takes"] == figures
+    assert set(model.metrics["evaluation"]) == {"translator_held_out_takes", "fast_held_out_takes"}
+
+
+def test_figures_of_another_version_are_refused(models):
+    before = (models / "manifest.json").read_text()
+    with pytest.raises(ValueError, match="version '1', not '2'"):
+        MF.put_evaluation("translator-test", "2", "translator_held_out_takes", {}, models)
+    with pytest.raises(ValueError, match="'nope' at version None"):
+        MF.put_evaluation("nope", "1", "translator_held_out_takes", {}, models)
+    assert (models / "manifest.json").read_text() == before
+
+
+def test_a_new_export_drops_the_old_evaluation(models):
+    MF.put_evaluation("translator-test", "1", "translator_held_out_takes", {"rows": {}}, models)
+    MF.put_entry(entry("2"), models)
+    doc = json.loads((models / "manifest.json").read_text())
+    assert "evaluation" not in doc["models"][0]["metrics"]
