@@ -475,7 +475,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def record_in_manifest(report: dict, models_dir: Path | None = None) -> None:
+def record_in_manifest(report: dict) -> None:
     """The report's table (rows, takes, date) into its model's manifest entry."""
     from model_export.manifest import put_evaluation
     from service.config import Settings
@@ -493,7 +493,7 @@ def record_in_manifest(report: dict, models_dir: Path | None = None) -> None:
         report["model_version"],
         f"{report['takes_of']}_held_out_takes",
         figures,
-        models_dir or Settings().models_dir,
+        Settings().models_dir,
     )
 
 

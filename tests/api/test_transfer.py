@@ -296,18 +296,23 @@ def test_a_z_up_file_is_styled_as_its_y_up_twin(shared_client, walk):
     assert np.abs(turned - out_y).max() < 0.05  # cm: BVH text rounding
 
 
-@needs_model
-def test_decoder_jitter_is_smoothed_away(walk):
-    """The decoder adds frame-to-frame jitter (2.9x the content's unsmoothed on this walk,
-    4.7x when whole clips ran through it); the output smoothing brings it near real
-    motion's (0.8x)."""
-    from service.engines.translator import TranslatorEngine
+@pytest.fixture(scope="module")
+def engine() -> TranslatorEngine:
+    """The shipped translator's engine, loaded as the service loads it."""
     from service.manifest import load_manifest
 
     settings = Settings()
     entry = next(m for m in load_manifest(settings.models_dir).models if m.name == ENTRY["name"])
     engine = TranslatorEngine(entry, settings.models_dir, settings)
     engine.load()
+    return engine
+
+
+@needs_model
+def test_decoder_jitter_is_smoothed_away(engine, walk):
+    """The decoder adds frame-to-frame jitter (2.9x the content's unsmoothed on this walk,
+    4.7x when whole clips ran through it); the output smoothing brings it near real
+    motion's (0.8x)."""
     content = retarget.to_canonical(bvh.loads(walk))
 
     def jitter(motion) -> float:  # cm per frame^2 of the joints around the hips
@@ -321,21 +326,10 @@ def test_decoder_jitter_is_smoothed_away(walk):
     assert np.mean(ratios) < 2.0, np.round(ratios, 2)
 
 
-def shipped_engine() -> TranslatorEngine:
-    from service.manifest import load_manifest
-
-    settings = Settings()
-    entry = next(m for m in load_manifest(settings.models_dir).models if m.name == ENTRY["name"])
-    engine = TranslatorEngine(entry, settings.models_dir, settings)
-    engine.load()
-    return engine
-
-
 @needs_model
-def test_a_frame_depends_on_nearby_frames_only(walk):
+def test_a_frame_depends_on_nearby_frames_only(engine, walk):
     """The networks run on training-length windows: frames appended far after a frame
     leave it as it was (a whole clip at once renormalised every frame by all the others)."""
-    engine = shipped_engine()
     content = retarget.to_canonical(bvh.loads(walk))
 
     def there_and_back(x: np.ndarray) -> np.ndarray:  # the walk, then backwards, then again
@@ -352,14 +346,13 @@ def test_a_frame_depends_on_nearby_frames_only(walk):
 
 
 @needs_model
-def test_own_style_gives_held_out_clips_back():
+def test_own_style_gives_held_out_clips_back(engine):
     """Strength 0 decodes a clip with its own style code: on the 15 held-out takes of Bandai
     dataset 1 the joints land 5.2 cm from the clip's on average (11.3 cm when a whole clip
     ran through the networks at once)."""
     split = json.loads((Settings().models_dir / "translator" / "split.json").read_text())
     held_out = split.get("val_takes") or split["validation_takes"]
     takes = sorted(t for t in held_out if t.startswith("dataset-1_"))
-    engine = shipped_engine()
     errors = []
     for take in takes:
         path = data_path("bandai", take.split("_")[0], f"{take}.bvh")
