@@ -24,13 +24,14 @@ from training.data import Clip
 @dataclass
 class EncodedClip:
     """One clip's features: ``content (F, 130)``, ``style3d (F, 63)``, 2D views
-    ``style2d (V, F, 32)`` float32, its style index and take."""
+    ``style2d (V, F, 32)`` float32, its style index, take and content label."""
 
     content: np.ndarray
     style3d: np.ndarray
     style2d: np.ndarray
     style: int
     take: str
+    label: str | None = None  # what is performed (Bandai content: walk, wave-left-hand...)
 
     @property
     def num_frames(self) -> int:
@@ -72,7 +73,11 @@ def encode_clips(
             continue
         enc = Fe.encode(clip.motion)
         style2d = project_views(enc.gpos, rng, views)
-        out.append(EncodedClip(enc.content, enc.style3d, style2d, index[clip.style], clip.take))
+        out.append(
+            EncodedClip(
+                enc.content, enc.style3d, style2d, index[clip.style], clip.take, clip.content
+            )
+        )
     return out
 
 
@@ -121,6 +126,18 @@ class Sampler:
         }
         for w in self.weights.values():
             w /= w.sum()
+        # content-matched draws: (style, label) -> clips and weights; label -> styles
+        grouped: dict[tuple[int, str], list[EncodedClip]] = {}
+        for s, cs in self.by_style.items():
+            for c in cs:
+                if c.label is not None:
+                    grouped.setdefault((s, c.label), []).append(c)
+        self.by_style_label = {}
+        self.styles_of: dict[str, list[int]] = {}
+        for (s, label), cs in sorted(grouped.items()):
+            w = np.array([c.num_frames - length + 1 for c in cs], dtype=np.float64)
+            self.by_style_label[s, label] = (cs, w / w.sum())
+            self.styles_of.setdefault(label, []).append(s)
 
     def random_styles(self, count: int) -> np.ndarray:
         return self.rng.choice(self.styles, size=count)
@@ -131,11 +148,26 @@ class Sampler:
         pos = np.searchsorted(self.styles, styles)
         return self.styles[(pos + offsets) % len(self.styles)]
 
-    def pick(self, styles: np.ndarray) -> list[tuple[EncodedClip, int]]:
+    def other_styles_performing(self, styles: np.ndarray, labels: list) -> np.ndarray:
+        """For each entry a different style that performs the same content label in the
+        data (uniform among them), any other style where none does."""
+        out = self.other_styles(styles)
+        for i, (s, label) in enumerate(zip(styles, labels, strict=True)):
+            choices = [t for t in self.styles_of.get(label, ()) if t != s]
+            if choices:
+                out[i] = choices[self.rng.integers(len(choices))]
+        return out
+
+    def pick(self, styles: np.ndarray, labels: list | None = None) -> list[tuple[EncodedClip, int]]:
+        """A random window of each style; of a clip with the given content label where
+        ``labels`` names one the style performs."""
         items = []
-        for s in styles:
-            cs = self.by_style[int(s)]
-            clip = cs[self.rng.choice(len(cs), p=self.weights[int(s)])]
+        for i, s in enumerate(styles):
+            cs, p = self.by_style[int(s)], self.weights[int(s)]
+            label = labels[i] if labels is not None else None
+            if label is not None and (int(s), label) in self.by_style_label:
+                cs, p = self.by_style_label[int(s), label]
+            clip = cs[self.rng.choice(len(cs), p=p)]
             items.append((clip, int(self.rng.integers(0, clip.num_frames - self.length + 1))))
         return items
 

@@ -7,7 +7,16 @@ One step, for a batch of B content windows ``m`` (style s):
   FK positions (paper eq. 3).
 - ``x``: a window of another style t: ``F(E_C(m) | E_S(x))`` must look like style t to
   the multi-style discriminator (hinge loss, only output t counts; eq. 4) and match the
-  mean discriminator features of real style-t windows in the batch (eq. 5).
+  mean discriminator features of real style-t windows in the batch (eq. 5). With
+  ``pair_content``, t is a style that performs m's content label (Bandai's content: walk,
+  wave-left-hand...) where another style does, and x a window of that content: the
+  discriminator then compares a translation with real style-t motion of the same action.
+  Drawn at random instead, a style whose takes never raise a hand taught the
+  generator to lower raised hands.
+- with ``w_cycle``: the content encoder must give back m's content code from a
+  translation of m to a window r of any other style (x unless ``pair_content``; not in
+  the paper): it asks every translation to keep what m performs, also to styles whose
+  takes never perform it, which no other term judges.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -67,6 +76,8 @@ class TrainConfig:
     lr_final_fraction: float = 0.1  # cosine decay to lr * this at ``steps``
     views: int = 8  # 2D projections per clip in the bank
     p_self: float = 0.25
+    # the other style's window performs the content window's label where that style has it
+    pair_content: bool = False
     p_style2d: float = 0.3
     w_rec_rot: float = 1.0
     w_rec_pos: float = 10.0  # positions are in leg lengths: errors of ~0.05
@@ -75,6 +86,8 @@ class TrainConfig:
     adv_warmup: int = 4000  # adversarial and feature-matching weights ramp up over these steps
     w_joint: float = 0.3
     w_trip: float = 0.3
+    # content cycle: E_C of a translation must give back the content code it was decoded from
+    w_cycle: float = 0.0
     triplet_margin: float = 5.0
     w_r1: float = 1.0
     r1_every: int = 4
@@ -221,10 +234,11 @@ class Losses:
         return scores[torch.arange(len(style)), style]
 
     def generator(
-        self, m: Batch, n: Batch, x: Batch, ramp: float = 1.0
+        self, m: Batch, n: Batch, x: Batch, ramp: float = 1.0, r: Batch | None = None
     ) -> tuple[torch.Tensor, dict, torch.Tensor]:
         """Generator loss, its parts, and the detached translations; ``ramp`` in [0, 1]
-        scales the adversarial terms (they slow reconstruction down early on)."""
+        scales the adversarial terms (they slow reconstruction down early on); the content
+        cycle translates m to ``r``'s style (default x)."""
         cfg = self.cfg
         use2d = torch.rand(len(m.style)) < cfg.p_style2d
         z_content = self.g.content_encoder(m.content)
@@ -247,6 +261,16 @@ class Losses:
             target = per_style[x.style]
         fm = F.l1_loss(feats.mean(dim=-1), target)
 
+        cycle = torch.zeros(())
+        if cfg.w_cycle > 0:
+            # to any style r, whether r performs m's content or not: no other term judges
+            # those translations
+            r = x if r is None else r
+            wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
+            root = m.content[:, Fe.OUTPUT_CHANNELS :]
+            again = self.g.content_encoder(torch.cat([wild, root], dim=1))
+            cycle = F.l1_loss(again, z_content.detach())
+
         joint = 0.5 * (F.mse_loss(z2_n, z3_n) + F.mse_loss(z2_x, z3_x))
         d_pos = (z3_n - z3_m).norm(dim=-1)
         d_neg = (z3_n - z3_x).norm(dim=-1)
@@ -259,10 +283,11 @@ class Losses:
             + ramp * cfg.w_fm * fm
             + cfg.w_joint * joint
             + cfg.w_trip * trip
+            + cfg.w_cycle * cycle
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
-            "joint": joint, "triplet": trip, "total_g": total,
+            "joint": joint, "triplet": trip, "content_cycle": cycle, "total_g": total,
         }  # fmt: skip
         return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
 
@@ -507,13 +532,20 @@ def train(
         items_n = sampler.pick(styles_m)
         same = rng.random(cfg.batch_size) < cfg.p_self
         items_n = [a if s else b for a, b, s in zip(items_m, items_n, same, strict=True)]
-        items_x = sampler.pick(sampler.other_styles(styles_m))
+        if cfg.pair_content:
+            labels = [c.label for c, _ in items_m]
+            items_x = sampler.pick(sampler.other_styles_performing(styles_m, labels), labels)
+        else:
+            items_x = sampler.pick(sampler.other_styles(styles_m))
         m, n, x = (
             to_batch(TD.cut(it, cfg.window, rng), norm) for it in (items_m, items_n, items_x)
         )
+        r = None
+        if cfg.w_cycle > 0 and cfg.pair_content:  # x is content-matched; r is any style
+            r = to_batch(TD.cut(sampler.pick(sampler.other_styles(styles_m)), cfg.window), norm)
 
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
-        loss_g, logs, fake = losses.generator(m, n, x, ramp)
+        loss_g, logs, fake = losses.generator(m, n, x, ramp, r)
         opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         opt_g.step()
@@ -559,9 +591,10 @@ def main(argv: list[str] | None = None) -> None:
         if f.name == "datasets":
             parser.add_argument("--datasets", type=int, nargs="+", default=None)
             continue
+        kind = type(getattr(defaults, f.name))
         parser.add_argument(
             f"--{f.name.replace('_', '-')}",
-            type=type(getattr(defaults, f.name)),
+            type=(lambda v: v.lower() in ("1", "true", "yes")) if kind is bool else kind,
             default=None,
             help=f"default {getattr(defaults, f.name)}",
         )

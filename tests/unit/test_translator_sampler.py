@@ -1,0 +1,41 @@
+"""The translator's training draws: content-matched pairs of style windows."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from training.translator.data import EncodedClip, Sampler
+
+
+def clip(style: int, label: str, frames: int = 40) -> EncodedClip:
+    z = np.zeros((frames, 1), dtype=np.float32)
+    return EncodedClip(z, z, z[None], style, f"{style}-{label}", label)
+
+
+def sampler() -> Sampler:
+    # style 0 walks and waves, style 1 walks and waves, style 2 only walks
+    clips = [clip(0, "walk"), clip(0, "wave"), clip(1, "walk"), clip(1, "wave"), clip(2, "walk")]
+    return Sampler(clips, length=32, rng=np.random.default_rng(0))
+
+
+def test_other_style_performs_the_same_content_where_one_does():
+    s = sampler()
+    styles = np.array([0, 1] * 200)
+    others = s.other_styles_performing(styles, ["wave", "wave"] * 200)
+    assert (others == np.array([1, 0] * 200)).all()  # style 2 never waves
+    walkers = s.other_styles_performing(np.zeros(400, dtype=int), ["walk"] * 400)
+    assert set(walkers.tolist()) == {1, 2}
+    # a content no other style performs: any other style
+    lonely = s.other_styles_performing(np.full(400, 2), ["jump"] * 400)
+    assert set(lonely.tolist()) == {0, 1}
+
+
+def test_pick_takes_a_clip_of_the_label_and_falls_back_to_any_of_the_style():
+    s = sampler()
+    picked = s.pick(np.array([0, 1] * 100), ["wave"] * 200)
+    assert {c.label for c, _ in picked} == {"wave"}
+    assert all(0 <= start <= 40 - 32 for _, start in picked)
+    fallback = s.pick(np.full(200, 2), ["wave"] * 200)
+    assert {c.label for c, _ in fallback} == {"walk"}
+    unmatched = s.pick(np.full(400, 0))
+    assert {c.label for c, _ in unmatched} == {"walk", "wave"}
