@@ -52,3 +52,20 @@ def test_conv_classifier_learns_what_tells_clips_apart():
         x = 0.3 * rng.normal(size=(len(t), 6))
         x[:, 0] += np.sin(t * (0.1 if k == 0 else 1.2) + 1.0)
         assert clf.predict(x.astype(np.float32)) == label
+
+
+def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
+    t = ES.Tally()
+    t.add(ES.Verdict("angry", "sad", "walk", 2.0, content_conv="run"), "angry", "walk")
+    t.add(ES.Verdict("sad", "sad", "run", 4.0, content_conv="run"), "angry", "run")
+    row = t.summary()
+    assert row["style_accuracy"] == 0.5 and row["style_accuracy_linear"] == 0.0
+    assert row["content_accuracy"] == 1.0 and row["content_accuracy_conv"] == 0.5
+    report = {
+        "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
+        "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
+        "rows": {"translator": row}, "per_style": {}, "per_style_real_target": {},
+    }  # fmt: skip
+    table = ES.markdown(report)
+    assert "content accuracy (conv)" in table
+    assert "| translator | 2 | 50.0% | 0.0% | 100.0% | 50.0% | 3.0 |" in table
