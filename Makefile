@@ -94,7 +94,7 @@ export-dance: $(VENV)/.dev
 	$(PY) -m model_export.dance
 
 eval-dance: $(VENV)/.dev
-	$(PY) -m training.eval_dance --json runs/eval/dance.json
+	$(PY) -m training.eval_dance --json runs/eval/dance.json --manifest
 
 # aberman2020 translator: ONNX graphs, statistics, style table and the manifest entry
 # "translator-bandai" from a copy of checkpoints/translator.pt (the training overwrites it).

@@ -1,6 +1,6 @@
 """Evaluation of the shipped dance model (jacob2019 made to work) on held-out songs.
 
-    python -m training.eval_dance [--seeds 3] [--json PATH]
+    python -m training.eval_dance [--seeds 3] [--json PATH] [--manifest]
 
 Everything runs through the shipped engine exactly as ``POST /v1/dance`` does (onnxruntime
 step loop, smoothing, beat warp, foot clean-up), on the part of each held-out song that its
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -96,7 +97,13 @@ def evaluate(seeds: int = 3, log=print) -> dict:
     engine, entry = load_engine()
     held, train = held_out_songs()
     genre_clf = ClipClassifier([window_features(m) for _, m in train], [g for g, _ in train])
-    report: dict = {"model": f"{entry.name} {entry.version}", "seeds": seeds, "songs": {}}
+    report: dict = {
+        "model": f"{entry.name} {entry.version}",
+        "model_name": entry.name,
+        "model_version": entry.version,
+        "seeds": seeds,
+        "songs": {},
+    }
     rows = {k: [] for k in ("real", "generated", "generated_no_warp")}
     chance = {k: [] for k in rows}
     sliding = {"real": [], "generated": []}
@@ -189,6 +196,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--json", type=Path, default=None)
+    p.add_argument(
+        "--manifest",
+        action="store_true",
+        help="also record the figures in the model's manifest entry "
+        "(metrics.evaluation.held_out_songs), so they travel with the model",
+    )
     args = p.parse_args(argv)
     report = evaluate(args.seeds)
     print()
@@ -196,7 +209,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1))
+    if args.manifest:
+        from service.config import Settings
+
+        record_in_manifest(report, Settings().models_dir)
     return 0
+
+
+def record_in_manifest(report: dict, models_dir: Path) -> None:
+    """The report's summary figures into its model's manifest entry (refused for another
+    version of the model; a new export drops them)."""
+    from model_export.manifest import put_evaluation
+
+    figures = {
+        "songs": len(report["songs"]),
+        "seeds": report["seeds"],
+        "beat_alignment": report["beat_alignment"],
+        "foot_sliding_cm_s": report["foot_sliding_cm_s"],
+        "genre_accuracy": report["genre_accuracy"],
+        "ten_minutes": report["ten_minutes"],
+        "measured": time.strftime("%Y-%m-%d"),
+        "by": "python -m training.eval_dance (beat alignment: AIST++ score; foot sliding in "
+        "cm/s; genre: logistic regression on real training-song dances)",
+    }
+    put_evaluation(
+        report["model_name"], report["model_version"], "held_out_songs", figures, models_dir
+    )
 
 
 if __name__ == "__main__":

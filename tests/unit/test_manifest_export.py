@@ -60,3 +60,23 @@ def test_a_new_export_drops_the_old_evaluation(models):
     MF.put_entry(entry("2"), models)
     doc = json.loads((models / "manifest.json").read_text())
     assert "evaluation" not in doc["models"][0]["metrics"]
+
+
+def test_dance_evaluation_records_its_summary(models):
+    from training import eval_dance as ED
+
+    report = {
+        "model_name": "translator-test", "model_version": "1", "seeds": 3,
+        "songs": {"a": {}, "b": {}},
+        "beat_alignment": {"generated": {"bas": 0.55, "chance": 0.27, "n": 6}},
+        "foot_sliding_cm_s": {"real": 9.0, "generated": 6.0},
+        "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25},
+        "ten_minutes": {"frames": 18000, "per_30s_min": 26.3},
+    }  # fmt: skip
+    ED.record_in_manifest(report, models)
+    (model,) = load_manifest(models).models
+    figures = model.metrics["evaluation"]["held_out_songs"]
+    assert figures["songs"] == 2 and figures["beat_alignment"]["generated"]["bas"] == 0.55
+    assert figures["ten_minutes"]["frames"] == 18000
+    with pytest.raises(ValueError, match="not '2'"):
+        ED.record_in_manifest(report | {"model_version": "2"}, models)
