@@ -11,8 +11,8 @@ One step, for a batch of B content windows ``m`` (style s):
   ``pair_content``, t is a style that performs m's content label (Bandai's content: walk,
   wave-left-hand...) where another style does, and x a window of that content: the
   discriminator then compares a translation with real style-t motion of the same action.
-  Drawn at random instead, a style whose takes never raise a hand taught the
-  generator to lower raised hands.
+  Drawn at random, the discriminator of a style whose takes never raise a hand judges
+  raised hands, and the translator lowers them for such styles.
 - with ``w_cycle``: the content encoder must give back m's content code from a
   translation of m to a window r of any other style (x unless ``pair_content``; not in
   the paper): it asks every translation to keep what m performs, also to styles whose
