@@ -281,8 +281,8 @@ class Verdict:
     style: str
     style_linear: str
     content: str
+    content_conv: str
     skating: float
-    content_conv: str = ""
 
 
 @dataclass
@@ -366,8 +366,8 @@ def evaluate(
             style_conv.predict(per_frame),
             style_linear.predict(f),
             content_clf.predict(f),
-            skating(motion),
             content_conv.predict(per_frame),
+            skating(motion),
         )
 
     def judge(take: str, motion: Motion) -> Verdict:

@@ -56,8 +56,8 @@ def test_conv_classifier_learns_what_tells_clips_apart():
 
 def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     t = ES.Tally()
-    t.add(ES.Verdict("angry", "sad", "walk", 2.0, content_conv="run"), "angry", "walk")
-    t.add(ES.Verdict("sad", "sad", "run", 4.0, content_conv="run"), "angry", "run")
+    t.add(ES.Verdict("angry", "sad", "walk", "run", 2.0), "angry", "walk")
+    t.add(ES.Verdict("sad", "sad", "run", "run", 4.0), "angry", "run")
     row = t.summary()
     assert row["style_accuracy"] == 0.5 and row["style_accuracy_linear"] == 0.0
     assert row["content_accuracy"] == 1.0 and row["content_accuracy_conv"] == 0.5
