@@ -6,6 +6,7 @@ import numpy as np
 
 from motion import bvh, retarget
 from motion import canonical as C
+from motion.skeleton import Motion
 from tests.rigs import FIXTURE
 from training import eval_style as ES
 
@@ -54,18 +55,66 @@ def test_conv_classifier_learns_what_tells_clips_apart():
         assert clf.predict(x.astype(np.float32)) == label
 
 
+def _left_arm_raised(angle: float) -> Motion:
+    """The canonical rest pose (arms out sideways) with the left arm turned ``angle`` up."""
+    lrot = np.zeros((30, len(C.JOINTS), 4))
+    lrot[..., 3] = 1.0
+    lrot[:, C.INDEX["UpperArm_L"], 2] = np.sin(angle / 2)
+    lrot[:, C.INDEX["UpperArm_L"], 3] = np.cos(angle / 2)
+    lpos = np.repeat(C.OFFSETS[None], 30, axis=0)
+    return Motion(C.SKELETON, 30.0, lrot, lpos)
+
+
+def test_hand_reach_is_how_far_the_higher_hand_gets_above_the_head():
+    arm = float(np.linalg.norm(C.OFFSETS[C.INDEX["Hand_L"]]))  # forearm
+    arm += float(np.linalg.norm(C.OFFSETS[C.INDEX["LowerArm_L"]]))  # upper arm
+    level, up = ES.hand_reach(_left_arm_raised(0.0)), ES.hand_reach(_left_arm_raised(np.pi / 2))
+    assert level < 0.0  # arms out sideways: hands at shoulder height, below the head
+    np.testing.assert_allclose(up - level, arm, rtol=1e-6)  # the whole arm now points up
+    assert ES.raises_a_hand("wave-left-hand") and ES.raises_a_hand("raise-up-both-hands")
+    assert not ES.raises_a_hand("walk") and not ES.raises_a_hand("bow")
+
+
 def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     t = ES.Tally()
-    t.add(ES.Verdict("angry", "sad", "walk", "run", 2.0), "angry", "walk")
-    t.add(ES.Verdict("sad", "sad", "run", "run", 4.0), "angry", "run")
+    t.add(ES.Verdict("angry", "sad", "walk", "run", "walk", 2.0, -30.0), "angry", "walk")
+    t.add(ES.Verdict("sad", "sad", "run", "run", "walk", 4.0, -40.0), "angry", "run")
+    t.add(
+        ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", 3.0, 12.5),
+        "angry",
+        "wave-left-hand",
+    )
     row = t.summary()
-    assert row["style_accuracy"] == 0.5 and row["style_accuracy_linear"] == 0.0
-    assert row["content_accuracy"] == 1.0 and row["content_accuracy_conv"] == 0.5
+    assert row["style_accuracy"] == 0.3333 and row["style_accuracy_linear"] == 0.0
+    assert row["content_accuracy"] == 0.6667 and row["content_accuracy_conv"] == 0.3333
+    assert row["content_accuracy_all_takes"] == 0.6667
+    assert row["hand_actions"] == 1 and row["hand_reach_cm"] == 12.5  # hand actions only
     report = {
         "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
         "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
         "rows": {"translator": row}, "per_style": {}, "per_style_real_target": {},
     }  # fmt: skip
     table = ES.markdown(report)
-    assert "content accuracy (conv)" in table
-    assert "| translator | 2 | 50.0% | 0.0% | 100.0% | 50.0% | 3.0 |" in table
+    assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
+    assert "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 3.0 | +12.5 (1) |" in table
+
+
+def test_folded_classifier_judges_a_take_with_networks_that_never_saw_it():
+    rng = np.random.default_rng(1)
+
+    def wave(freq: float) -> np.ndarray:
+        return np.sin(np.arange(60) * freq)[:, None] + 0.2 * rng.normal(size=(60, 3))
+
+    shared = [wave(0.1).astype(np.float32), wave(1.2).astype(np.float32)]
+    takes = [f"take-{i}" for i in range(12)]
+    labels = ["calm" if i % 2 else "lively" for i in range(12)]
+    labels[0] = "unique"  # a label only take-0 shows
+    features = [wave(0.1 if lab == "calm" else 1.2).astype(np.float32) for lab in labels]
+    clf = ES.FoldedClassifier(
+        shared, ["calm", "lively"], features, labels, takes, folds=3, seeds=(0,), steps=5
+    )
+    own = clf.fold_of("take-0")
+    assert all(0 <= clf.fold_of(t) < 3 for t in takes)
+    assert "unique" not in clf.classifiers[own].classes
+    assert all("unique" in clf.classifiers[k].classes for k in range(3) if k != own)
+    assert clf.predict(features[1], own) in clf.classifiers[own].classes
