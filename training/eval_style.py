@@ -18,7 +18,7 @@ from the first half of every held-out take:
   walk-back, walk-right and raise-up-right-hand are held out in one style each);
 - content (all takes): the same networks trained on the held-out first halves and on the
   family's training takes too (``FoldedClassifier``: three folds by take, a clip judged
-  beside a real target by the fold that never saw that target's take). With every
+  beside a real target by the fold that never saw that target's take). With each held-out
   content seen in 7-19 styles they recognise about 70% of the real target clips: the
   yardstick of content that does not mistake a new style for a lost action. It departs
   from "classifiers learn from held-out takes only", so the two columns above stay;
