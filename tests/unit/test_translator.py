@@ -144,3 +144,44 @@ def test_content_cycle_translates_to_its_own_style_batch():
     # r's style feeds the cycle only: the adversarial term still judges the translation to x
     assert logs_r["content_cycle"] != pytest.approx(logs_x["content_cycle"])
     assert logs_r["adv_g"] == pytest.approx(logs_x["adv_g"])
+
+
+def test_hands_dropped_measures_raised_hands_that_end_below_the_head():
+    from training.translator import train as T
+
+    hand, head = C.INDEX["Hand_L"] - 1, C.INDEX["Head"] - 1  # body joints: no joint_Root
+    content = torch.zeros(1, 4, 21, 3)
+    content[..., head, 1] = 1.6
+    content[..., hand, 1] = torch.tensor([1.0, 1.9, 2.0, 1.0])  # raised in frames 1 and 2
+    translation = content.clone()
+    assert T.hands_dropped(content, translation) == 0.0
+    translation[..., hand, 1] = torch.tensor([0.2, 1.2, 1.7, 0.2])  # 0.4 below, then above
+    assert T.hands_dropped(content, translation) == pytest.approx(0.2)  # (0.4 + 0) / 2
+    translation[..., hand, 1] = 0.0  # lowering a hand the content never raised costs nothing
+    assert T.hands_dropped(content[..., [0, 3], :, :], translation[..., [0, 3], :, :]) == 0.0
+
+
+def test_raised_hands_term_is_logged_only_when_weighted():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    kinds = {"content": Fe.CONTENT_CHANNELS, "style3d": Fe.STYLE3D_CHANNELS,
+             "style2d": Fe.STYLE2D_CHANNELS}  # fmt: skip
+    stats = Fe.FeatureStats(
+        {k: np.zeros(c, np.float32) for k, c in kinds.items()},
+        {k: np.ones(c, np.float32) for k, c in kinds.items()},
+    )
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
+    m.positions[..., C.INDEX["Hand_L"] - 1, 1] = 50.0  # the content's left hand, far above
+    off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig())
+    on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_raised_hands=1.0))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total_off, logs_off, _ = off.generator(m, n, x, r=r)
+        torch.manual_seed(1)
+        total_on, logs_on, _ = on.generator(m, n, x, r=r)
+    assert logs_off["raised_hands_cm"] == 0.0 and logs_on["raised_hands_cm"] > 0.0
+    expected = logs_on["raised_hands_cm"] / Fe.LEG
+    assert float(total_on - total_off) == pytest.approx(expected, rel=1e-4, abs=1e-6)

@@ -17,6 +17,9 @@ One step, for a batch of B content windows ``m`` (style s):
   translation of m to a window r of any other style (x unless ``pair_content``; not in
   the paper): it asks every translation to keep what m performs, also to styles whose
   takes never perform it, which no other term judges.
+- with ``w_raised_hands``: where m holds a hand above its head, the translation of m to r
+  must too (``hands_dropped``; not in the paper): its style may change how the hand rises,
+  not whether it ends above the head.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -48,6 +51,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from motion import canonical as C
 from motion import features as Fe
 from training import data as D
 from training.fk import RootLocalFK
@@ -88,6 +92,8 @@ class TrainConfig:
     w_trip: float = 0.3
     # content cycle: E_C of a translation must give back the content code it was decoded from
     w_cycle: float = 0.0
+    # a hand the content window raises above the head stays above it in a translation to r
+    w_raised_hands: float = 0.0
     triplet_margin: float = 5.0
     w_r1: float = 1.0
     r1_every: int = 4
@@ -206,6 +212,22 @@ def to_batch(w: TD.Windows, norm: Standardizer) -> Batch:
 # --------------------------------------------------------------------------- losses
 
 
+_HANDS = [C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1]  # body joints: joint_Root left out
+_HEAD = C.INDEX["Head"] - 1
+
+
+def hands_dropped(content: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
+    """Mean depth below the head of the translation's hands, over the frames where the
+    content holds that hand above its head (leg lengths; 0 where it never does). Root-local
+    positions ``(B, T, 21, 3)``. Twelve Bandai styles never raise a hand, and translations
+    to them lowered raised hands by 30-46 cm: the style may change how a hand is raised,
+    not whether it ends above the head."""
+    above = content[..., _HANDS, 1] - content[..., [_HEAD], 1]
+    height = translation[..., _HANDS, 1] - translation[..., [_HEAD], 1]
+    raised = (above > 0).float()
+    return (F.relu(-height) * raised).sum() / raised.sum().clamp_min(1.0)
+
+
 class Losses:
     """The networks and the loss terms of one step; ``generator`` and ``discriminator``."""
 
@@ -261,15 +283,18 @@ class Losses:
             target = per_style[x.style]
         fm = F.l1_loss(feats.mean(dim=-1), target)
 
-        cycle = torch.zeros(())
-        if cfg.w_cycle > 0:
+        cycle, raised = torch.zeros(()), torch.zeros(())
+        if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
             # to any style r, whether r performs m's content or not: no other term judges
             # those translations
             r = x if r is None else r
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
+        if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
             again = self.g.content_encoder(torch.cat([wild, root], dim=1))
             cycle = F.l1_loss(again, z_content.detach())
+        if cfg.w_raised_hands > 0:
+            raised = hands_dropped(m.positions, self.positions(wild, m.hips_height))
 
         joint = 0.5 * (F.mse_loss(z2_n, z3_n) + F.mse_loss(z2_x, z3_x))
         d_pos = (z3_n - z3_m).norm(dim=-1)
@@ -284,10 +309,12 @@ class Losses:
             + cfg.w_joint * joint
             + cfg.w_trip * trip
             + cfg.w_cycle * cycle
+            + cfg.w_raised_hands * raised
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
-            "joint": joint, "triplet": trip, "content_cycle": cycle, "total_g": total,
+            "joint": joint, "triplet": trip, "content_cycle": cycle,
+            "raised_hands_cm": raised * Fe.LEG, "total_g": total,
         }  # fmt: skip
         return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
 
@@ -541,7 +568,8 @@ def train(
             to_batch(TD.cut(it, cfg.window, rng), norm) for it in (items_m, items_n, items_x)
         )
         r = None
-        if cfg.w_cycle > 0 and cfg.pair_content:  # x is content-matched; r is any style
+        # x is content-matched; r is any style
+        if (cfg.w_cycle > 0 or cfg.w_raised_hands > 0) and cfg.pair_content:
             r = to_batch(TD.cut(sampler.pick(sampler.other_styles(styles_m)), cfg.window), norm)
 
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
