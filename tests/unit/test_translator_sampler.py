@@ -39,3 +39,15 @@ def test_pick_takes_a_clip_of_the_label_and_falls_back_to_any_of_the_style():
     assert {c.label for c, _ in fallback} == {"walk"}
     unmatched = s.pick(np.full(400, 0))
     assert {c.label for c, _ in unmatched} == {"walk", "wave"}
+
+
+def test_style_that_never_performs_the_content_where_one_does_not():
+    s = sampler()
+    wavers = s.other_styles_not_performing(np.array([0, 1] * 200), ["wave", "wave"] * 200)
+    assert set(wavers.tolist()) == {2}  # only style 2 never waves
+    # every style walks: any other style
+    walkers = s.other_styles_not_performing(np.zeros(400, dtype=int), ["walk"] * 400)
+    assert set(walkers.tolist()) == {1, 2}
+    # a content nobody performs: any other style
+    jumpers = s.other_styles_not_performing(np.full(400, 2), ["jump"] * 400)
+    assert set(jumpers.tolist()) == {0, 1}

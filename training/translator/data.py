@@ -158,6 +158,17 @@ class Sampler:
                 out[i] = choices[self.rng.integers(len(choices))]
         return out
 
+    def other_styles_not_performing(self, styles: np.ndarray, labels: list) -> np.ndarray:
+        """For each entry a different style that never performs the same content label in
+        the data (uniform among them), any other style where every style does."""
+        out = self.other_styles(styles)
+        for i, (s, label) in enumerate(zip(styles, labels, strict=True)):
+            performing = set(self.styles_of.get(label, ()))
+            choices = [t for t in self.styles if t != s and t not in performing]
+            if choices:
+                out[i] = choices[self.rng.integers(len(choices))]
+        return out
+
     def pick(self, styles: np.ndarray, labels: list | None = None) -> list[tuple[EncodedClip, int]]:
         """A random window of each style; of a clip with the given content label where
         ``labels`` names one the style performs."""

@@ -18,8 +18,10 @@ One step, for a batch of B content windows ``m`` (style s):
   the paper): it asks every translation to keep what m performs, also to styles whose
   takes never perform it, which no other term judges.
 - with ``w_raised_hands``: where m holds a hand above its head, the translation of m to r
-  must too (``hands_dropped``; not in the paper): its style may change how the hand rises,
-  not whether it ends above the head.
+  must too (``hands_dropped``; not in the paper), r then a style whose takes never
+  perform m's content (with ``pair_content``): its style may change how the hand rises,
+  not whether it ends above the head. Styles that do perform it (feminine raises hands
+  lower than most) are left to the discriminator, which compares them with their takes.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -568,9 +570,15 @@ def train(
             to_batch(TD.cut(it, cfg.window, rng), norm) for it in (items_m, items_n, items_x)
         )
         r = None
-        # x is content-matched; r is any style
+        # x is content-matched; r is any style, or with w_raised_hands a style that never
+        # performs m's content: styles that do are judged against their own takes
         if (cfg.w_cycle > 0 or cfg.w_raised_hands > 0) and cfg.pair_content:
-            r = to_batch(TD.cut(sampler.pick(sampler.other_styles(styles_m)), cfg.window), norm)
+            styles_r = (
+                sampler.other_styles_not_performing(styles_m, labels)
+                if cfg.w_raised_hands > 0
+                else sampler.other_styles(styles_m)
+            )
+            r = to_batch(TD.cut(sampler.pick(styles_r), cfg.window), norm)
 
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
         loss_g, logs, fake = losses.generator(m, n, x, ramp, r)
