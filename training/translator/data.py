@@ -151,20 +151,24 @@ class Sampler:
     def other_styles_performing(self, styles: np.ndarray, labels: list) -> np.ndarray:
         """For each entry a different style that performs the same content label in the
         data (uniform among them), any other style where none does."""
-        out = self.other_styles(styles)
-        for i, (s, label) in enumerate(zip(styles, labels, strict=True)):
-            choices = [t for t in self.styles_of.get(label, ()) if t != s]
-            if choices:
-                out[i] = choices[self.rng.integers(len(choices))]
-        return out
+        return self._other_styles_among(styles, labels, lambda label: self.styles_of.get(label, ()))
 
     def other_styles_not_performing(self, styles: np.ndarray, labels: list) -> np.ndarray:
         """For each entry a different style that never performs the same content label in
         the data (uniform among them), any other style where every style does."""
+
+        def never(label: str) -> list[int]:
+            performing = set(self.styles_of.get(label, ()))
+            return [t for t in self.styles if t not in performing]
+
+        return self._other_styles_among(styles, labels, never)
+
+    def _other_styles_among(self, styles: np.ndarray, labels: list, candidates) -> np.ndarray:
+        """For each entry a style of ``candidates(label)`` other than its own (uniform),
+        any other style where there is none."""
         out = self.other_styles(styles)
         for i, (s, label) in enumerate(zip(styles, labels, strict=True)):
-            performing = set(self.styles_of.get(label, ()))
-            choices = [t for t in self.styles if t != s and t not in performing]
+            choices = [t for t in candidates(label) if t != s]
             if choices:
                 out[i] = choices[self.rng.integers(len(choices))]
         return out

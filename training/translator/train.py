@@ -287,8 +287,8 @@ class Losses:
 
         cycle, raised = torch.zeros(()), torch.zeros(())
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
-            # to any style r, whether r performs m's content or not: no other term judges
-            # those translations
+            # to r, a style that may not perform m's content: no other term judges those
+            # translations
             r = x if r is None else r
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
         if cfg.w_cycle > 0:
