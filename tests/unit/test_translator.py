@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -161,6 +163,27 @@ def test_hands_dropped_measures_raised_hands_that_end_below_the_head():
     assert T.hands_dropped(content[..., [0, 3], :, :], translation[..., [0, 3], :, :]) == 0.0
 
 
+def test_hand_amplitude_changed_allows_a_factor_of_two_either_way():
+    from training.translator import train as T
+
+    left, right = C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1
+    content = torch.zeros(1, 32, 21, 3)
+    wave = torch.sin(torch.linspace(0, 2 * math.pi, 32))
+    content[..., left, 1] = 0.3 * wave  # the left hand moves, the right is still
+    assert T.hand_amplitude_changed(content, content) == 0.0
+    translation = content.clone()
+    translation[..., left, 1] *= 0.6  # smaller, within a factor of two
+    translation[..., right, 0] = 0.01 * wave  # the idle hand trembles under the floor
+    assert T.hand_amplitude_changed(content, translation) == 0.0
+    translation[..., left, 1] = 0.3 * wave / 4  # a quarter: beyond the factor, on one hand
+    a, floor = 0.3 * float(wave.std(unbiased=False)), 2.0 / Fe.LEG
+    beyond = math.log((a + floor) / (a / 4 + floor)) - math.log(2.0)
+    assert T.hand_amplitude_changed(content, translation) == pytest.approx(beyond / 2, rel=1e-4)
+    translation = content.clone()
+    translation[..., right, 0] = 0.2 * wave  # the idle hand swings
+    assert T.hand_amplitude_changed(content, translation) > 0.5
+
+
 def test_raised_hands_term_is_logged_only_when_weighted():
     from training.translator import train as T
 
@@ -185,3 +208,14 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     assert logs_off["raised_hands_cm"] == 0.0 and logs_on["raised_hands_cm"] > 0.0
     expected = logs_on["raised_hands_cm"] / Fe.LEG
     assert float(total_on - total_off) == pytest.approx(expected, rel=1e-4, abs=1e-6)
+    # the hand-amplitude term judges the translations to x and to r alike
+    amp = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_hand_amplitude=1.0))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total_amp, logs_amp, fake = amp.generator(m, n, x, r=r)
+        fake_pos = amp.positions(fake, m.hips_height)
+    assert logs_off["hand_amplitude"] == 0.0 and logs_amp["hand_amplitude"] > 0.0
+    assert logs_amp["hand_amplitude"] == pytest.approx(
+        float(T.hand_amplitude_changed(m.positions, fake_pos)), rel=1e-5
+    )  # no w_cycle or w_raised_hands: no translation to r is made
+    assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)

@@ -22,6 +22,10 @@ One step, for a batch of B content windows ``m`` (style s):
   perform m's content (with ``pair_content``): its style may change how the hand rises,
   not whether it ends above the head. Styles that do perform it (feminine raises hands
   lower than most) are left to the discriminator, which compares them with their takes.
+- with ``w_hand_amplitude``: each hand of the translations to x (and r) moves within a
+  factor of two as much as in m (``hand_amplitude_changed``; not in the paper): they had
+  swung the idle hand of one-hand actions and shrunk the raised one, and the content
+  classifier took raises for waves.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -96,6 +100,9 @@ class TrainConfig:
     w_cycle: float = 0.0
     # a hand the content window raises above the head stays above it in a translation to r
     w_raised_hands: float = 0.0
+    # each hand moves within a factor HAND_AMPLITUDE_RATIO as much as in the content window,
+    # in the translations to x (and r)
+    w_hand_amplitude: float = 0.0
     triplet_margin: float = 5.0
     w_r1: float = 1.0
     r1_every: int = 4
@@ -230,6 +237,26 @@ def hands_dropped(content: torch.Tensor, translation: torch.Tensor) -> torch.Ten
     return (F.relu(-height) * raised).sum() / raised.sum().clamp_min(1.0)
 
 
+HAND_AMPLITUDE_RATIO = 2.0
+_AMPLITUDE_FLOOR = 2.0 / Fe.LEG  # 2 cm: a hand at rest jitters; below this it is still
+
+
+def hand_amplitude_changed(content: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
+    """How far (log ratio) each hand's amplitude of movement in the translation is from the
+    content's, beyond a factor ``HAND_AMPLITUDE_RATIO`` either way; mean over hands.
+    Amplitude: root-local position's standard deviation over the window (``(B, T, 21, 3)``,
+    leg lengths). Instance norm strips it from the content code, and translations of
+    one-hand actions moved the idle hand 3-4x as fast as the content while the raised
+    hand's height varied 60% less (real takes of every style keep it: 26 cm)."""
+
+    def amplitude(p: torch.Tensor) -> torch.Tensor:
+        hands = p[..., _HANDS, :]
+        return hands.var(dim=1, unbiased=False).sum(-1).sqrt() + _AMPLITUDE_FLOOR
+
+    ratio = torch.log(amplitude(translation) / amplitude(content)).abs()
+    return F.relu(ratio - math.log(HAND_AMPLITUDE_RATIO)).mean()
+
+
 class Losses:
     """The networks and the loss terms of one step; ``generator`` and ``discriminator``."""
 
@@ -275,7 +302,8 @@ class Losses:
         rec_pos = F.l1_loss(self.positions(rec, m.hips_height), m.positions)
 
         fake = self.g.decoder(z_content, code_x)
-        fake_in = self.disc_input(fake, self.positions(fake, m.hips_height))
+        fake_pos = self.positions(fake, m.hips_height)
+        fake_in = self.disc_input(fake, fake_pos)
         scores, feats = self.d(fake_in)
         adv = -self.pick(scores, x.style).mean()
         with torch.no_grad():
@@ -285,18 +313,24 @@ class Losses:
             target = per_style[x.style]
         fm = F.l1_loss(feats.mean(dim=-1), target)
 
-        cycle, raised = torch.zeros(()), torch.zeros(())
+        cycle, raised, amplitude = torch.zeros(()), torch.zeros(()), torch.zeros(())
+        wild = wild_pos = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
             # to r, a style that may not perform m's content: no other term judges those
             # translations
             r = x if r is None else r
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
+            wild_pos = fake_pos if wild is fake else self.positions(wild, m.hips_height)
         if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
             again = self.g.content_encoder(torch.cat([wild, root], dim=1))
             cycle = F.l1_loss(again, z_content.detach())
         if cfg.w_raised_hands > 0:
-            raised = hands_dropped(m.positions, self.positions(wild, m.hips_height))
+            raised = hands_dropped(m.positions, wild_pos)
+        if cfg.w_hand_amplitude > 0:
+            amplitude = hand_amplitude_changed(m.positions, fake_pos)
+            if wild is not None and wild is not fake:
+                amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos))
 
         joint = 0.5 * (F.mse_loss(z2_n, z3_n) + F.mse_loss(z2_x, z3_x))
         d_pos = (z3_n - z3_m).norm(dim=-1)
@@ -312,11 +346,12 @@ class Losses:
             + cfg.w_trip * trip
             + cfg.w_cycle * cycle
             + cfg.w_raised_hands * raised
+            + cfg.w_hand_amplitude * amplitude
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
             "joint": joint, "triplet": trip, "content_cycle": cycle,
-            "raised_hands_cm": raised * Fe.LEG, "total_g": total,
+            "raised_hands_cm": raised * Fe.LEG, "hand_amplitude": amplitude, "total_g": total,
         }  # fmt: skip
         return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
 
