@@ -102,6 +102,14 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     assert resumed["val_takes"] == saved["val_takes"]
     g, stats, meta = T.load_translator(ckpt)
     assert meta["step"] == 6 and stats.mean["content"].shape == (Fe.CONTENT_CHANNELS,)
+    # content heads join a discriminator trained without them, with an optimizer group
+    T.main(args + ["--resume", "--w-content-adv", "0.5"])
+    headed = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert headed["step"] == 9 and headed["model_config"]["num_contents"] == len(headed["contents"])
+    assert headed["discriminator"]["content_head.weight"].shape[0] == len(headed["contents"]) > 1
+    assert [group.get("lr_scale", 1.0) for group in headed["opt_d"]["param_groups"]] == [1.0, 10.0]
+    T.main(args + ["--resume"])  # and go on with them
+    assert torch.load(ckpt, map_location="cpu", weights_only=False)["step"] == 12
 
 
 def random_batch(batch: int, frames: int, styles: list[int]):
@@ -219,3 +227,37 @@ def test_raised_hands_term_is_logged_only_when_weighted():
         float(T.hand_amplitude_changed(m.positions, fake_pos)), rel=1e-5
     )  # no w_cycle or w_raised_hands: no translation to r is made
     assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)
+
+
+def test_content_heads_judge_translations_by_the_content_windows_label():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, num_contents=4)
+    kinds = {"content": Fe.CONTENT_CHANNELS, "style3d": Fe.STYLE3D_CHANNELS,
+             "style2d": Fe.STYLE2D_CHANNELS}  # fmt: skip
+    stats = Fe.FeatureStats(
+        {k: np.zeros(c, np.float32) for k, c in kinds.items()},
+        {k: np.ones(c, np.float32) for k, c in kinds.items()},
+    )
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    scores, _ = d(torch.randn(2, Fe.STYLE3D_CHANNELS + Fe.OUTPUT_CHANNELS, 32))
+    assert scores.shape[1] == 3 + 4  # style heads, then content heads
+    m, n, x = (random_batch(3, 32, s) for s in ([0, 1, 2], [0, 1, 2], [1, 2, 0]))
+    m.label, x.label = torch.tensor([2, -1, 0]), torch.tensor([2, 1, 0])  # m's second: none
+    on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_content_adv=1.0))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total, logs, fake = on.generator(m, n, x)
+        fake_scores = d(on.disc_input(fake, on.positions(fake, m.hips_height)))[0]
+    expected = -0.5 * float(fake_scores[0, 3 + 2].mean() + fake_scores[2, 3 + 0].mean())
+    assert logs["content_adv_g"] == pytest.approx(expected, rel=1e-4)
+    off = T.Losses(g, M.Discriminator(M.ModelConfig(num_styles=3)), T.Standardizer(stats),
+                   T.TrainConfig())  # fmt: skip
+    with torch.no_grad():
+        assert off.generator(m, n, x)[1]["content_adv_g"] == 0.0
+    # the discriminator learns its content heads from real windows and translations
+    loss, logs_d = on.discriminator(m, x, fake, r1=True)
+    loss.backward()
+    assert logs_d["d_real_content"] > 0.0 and logs_d["d_fake_content"] > 0.0
+    assert float(d.content_head.weight.grad.abs().sum()) > 0.0

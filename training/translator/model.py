@@ -40,6 +40,7 @@ class ModelConfig:
     mlp_hidden: int = 192
     decoder_resblocks: int = 2
     disc_channels: list[int] = field(default_factory=lambda: [96, 128, 160])
+    num_contents: int = 0  # > 0: the discriminator also judges each content label
     kernel: int = 5
 
     @property
@@ -193,6 +194,8 @@ class Decoder(nn.Module):
 class Discriminator(nn.Module):
     """Multi-style discriminator (FUNIT's multi-task one): ``(B, C_in, T)`` -> per-style
     scores ``(B, num_styles, T / 2**n)`` and the last features ``(B, C, T / 2**n)``.
+    With ``num_contents``, per-content scores follow the style ones (``num_styles + k``
+    for content label k): is this a real performance of that action, in any style.
 
     Reads root-local positions and rotations (both standardised), so it judges poses and
     joint twists alike.
@@ -206,12 +209,16 @@ class Discriminator(nn.Module):
             conv(a, b, cfg.kernel, stride=2) for a, b in zip(chans[:-1], chans[1:], strict=True)
         )
         self.head = nn.Conv1d(chans[-1], cfg.num_styles, 1)
+        self.content_head = nn.Conv1d(chans[-1], cfg.num_contents, 1) if cfg.num_contents else None
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h = F.leaky_relu(self.first(x), 0.2)
         for layer in self.down:
             h = F.leaky_relu(layer(h), 0.2)
-        return self.head(h), h
+        scores = self.head(h)
+        if self.content_head is not None:
+            scores = torch.cat([scores, self.content_head(h)], dim=1)
+        return scores, h
 
 
 class Translator(nn.Module):

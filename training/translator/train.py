@@ -26,6 +26,11 @@ One step, for a batch of B content windows ``m`` (style s):
   factor of two as much as in m (``hand_amplitude_changed``; not in the paper): they had
   swung the idle hand of one-hand actions and shrunk the raised one, and the content
   classifier took raises for waves.
+- with ``w_content_adv``: the discriminator also has a head per content label (``walk``,
+  ``raise-up-left-hand``...), trained like the style heads on real windows of that label
+  (any style) against translations of content windows with that label; the translations
+  to x (and r) must pass the head of m's label (not in the paper). The style heads judge
+  style but not what is performed, and translations of raises passed as waves.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -103,6 +108,9 @@ class TrainConfig:
     # each hand moves within a factor HAND_AMPLITUDE_RATIO as much as in the content window,
     # in the translations to x (and r)
     w_hand_amplitude: float = 0.0
+    # the discriminator's content heads judge whether a translation performs m's label
+    w_content_adv: float = 0.0
+    content_head_lr_scale: float = 10.0  # a head added to a trained discriminator catches up
     triplet_margin: float = 5.0
     w_r1: float = 1.0
     r1_every: int = 4
@@ -121,6 +129,7 @@ class TrainConfig:
 @dataclass
 class Prepared:
     styles: list[str]
+    contents: list[str]  # content labels of the training takes, sorted
     train: list[TD.EncodedClip]
     val: list[TD.EncodedClip]
     val_takes: list[str]
@@ -153,7 +162,8 @@ def prepare(cfg: TrainConfig, val_takes: list[str] | None = None) -> Prepared:
             "style2d": [v for c in enc_train for v in c.style2d],
         }
     )
-    return Prepared(styles, enc_train, enc_val, val_takes, stats)
+    contents = sorted({c.label for c in enc_train if c.label is not None})
+    return Prepared(styles, contents, enc_train, enc_val, val_takes, stats)
 
 
 class ChannelStats(torch.nn.Module):
@@ -193,6 +203,7 @@ class Batch:
     style: torch.Tensor  # (B,)
     positions: torch.Tensor  # (B, T, 21, 3) raw root-local positions, leg lengths
     hips_height: torch.Tensor  # (B, T) leg lengths
+    label: torch.Tensor | None = None  # (B,) content label index, -1 for none
 
     @property
     def rotations(self) -> torch.Tensor:
@@ -284,6 +295,18 @@ class Losses:
         """The given style's scores ``(B, T')`` of ``(B, S, T')``."""
         return scores[torch.arange(len(style)), style]
 
+    def pick_content(self, scores: torch.Tensor, label: torch.Tensor | None) -> torch.Tensor:
+        """Each window's content-head scores ``(B', T')``, windows without a label left out
+        (empty without content heads)."""
+        if label is None or self.d.content_head is None:
+            return scores.new_zeros((0, scores.shape[-1]))
+        keep = label >= 0
+        return self.pick(scores[keep], self.g.cfg.num_styles + label[keep])
+
+    @staticmethod
+    def hinge_mean(x: torch.Tensor) -> torch.Tensor:
+        return x.mean() if x.numel() else x.new_zeros(())
+
     def generator(
         self, m: Batch, n: Batch, x: Batch, ramp: float = 1.0, r: Batch | None = None
     ) -> tuple[torch.Tensor, dict, torch.Tensor]:
@@ -314,6 +337,7 @@ class Losses:
         fm = F.l1_loss(feats.mean(dim=-1), target)
 
         cycle, raised, amplitude = torch.zeros(()), torch.zeros(()), torch.zeros(())
+        content_adv = torch.zeros(())
         wild = wild_pos = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
             # to r, a style that may not perform m's content: no other term judges those
@@ -334,6 +358,12 @@ class Losses:
             amplitude = hand_amplitude_changed(m.positions, fake_pos)
             if wild is not None and wild is not fake:
                 amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos))
+        if cfg.w_content_adv > 0:
+            content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
+            if wild_pos is not None and wild is not fake:
+                wild_scores = self.d(self.disc_input(wild, wild_pos))[0]
+                wild_adv = -self.hinge_mean(self.pick_content(wild_scores, m.label))
+                content_adv = 0.5 * (content_adv + wild_adv)
 
         joint = 0.5 * (F.mse_loss(z2_n, z3_n) + F.mse_loss(z2_x, z3_x))
         d_pos = (z3_n - z3_m).norm(dim=-1)
@@ -350,25 +380,41 @@ class Losses:
             + cfg.w_cycle * cycle
             + cfg.w_raised_hands * raised
             + cfg.w_hand_amplitude * amplitude
+            + ramp * cfg.w_content_adv * content_adv
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
             "joint": joint, "triplet": trip, "content_cycle": cycle,
-            "raised_hands_cm": raised * Fe.LEG, "hand_amplitude": amplitude, "total_g": total,
+            "raised_hands_cm": raised * Fe.LEG, "hand_amplitude": amplitude, "content_adv_g": content_adv,
+            "total_g": total,
         }  # fmt: skip
         return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
 
     def discriminator(self, m: Batch, x: Batch, fake: torch.Tensor, r1: bool) -> tuple:
         real_x = x.disc_input.requires_grad_(r1)
-        scores_x = self.pick(self.d(real_x)[0], x.style)
-        scores_m = self.pick(self.d(m.disc_input)[0], m.style)
+        all_x, all_m = self.d(real_x)[0], self.d(m.disc_input)[0]
+        scores_x, scores_m = self.pick(all_x, x.style), self.pick(all_m, m.style)
         with torch.no_grad():
             fake_in = self.disc_input(fake, self.positions(fake, m.hips_height))
-        scores_f = self.pick(self.d(fake_in)[0], x.style)
+        all_f = self.d(fake_in)[0]
+        scores_f = self.pick(all_f, x.style)
         real = 0.5 * (F.relu(1 - scores_x).mean() + F.relu(1 - scores_m).mean())
         fake_loss = F.relu(1 + scores_f).mean()
         total = real + fake_loss
         logs = {"d_real": float(real.detach()), "d_fake": float(fake_loss.detach())}
+        if self.d.content_head is not None:
+            content_x = self.pick_content(all_x, x.label)
+            real_c = 0.5 * (
+                self.hinge_mean(F.relu(1 - content_x))
+                + self.hinge_mean(F.relu(1 - self.pick_content(all_m, m.label)))
+            )
+            fake_c = self.hinge_mean(F.relu(1 + self.pick_content(all_f, m.label)))
+            total = total + real_c + fake_c
+            logs |= {
+                "d_real_content": float(real_c.detach()),
+                "d_fake_content": float(fake_c.detach()),
+            }
+            scores_x = torch.cat([scores_x, content_x])
         if r1:
             (grad,) = torch.autograd.grad(scores_x.sum(), real_x, create_graph=True)
             penalty = grad.pow(2).sum(dim=(1, 2)).mean()
@@ -521,23 +567,47 @@ def train(
             )
     model_cfg = model_cfg or ModelConfig()
     model_cfg.num_styles = len(prep.styles)
+    if cfg.w_content_adv > 0 and not model_cfg.num_contents:
+        model_cfg.num_contents = len(prep.contents)
+    if (
+        ckpt is not None
+        and model_cfg.num_contents
+        and ckpt.get("contents", prep.contents) != prep.contents
+    ):
+        raise SystemExit(
+            f"checkpoint content labels {ckpt['contents']} differ from the data's {prep.contents}"
+        )
+    label_index = {label: i for i, label in enumerate(prep.contents)}
 
     torch.manual_seed(cfg.seed)
     g, d = Translator(model_cfg), Discriminator(model_cfg)
     norm = Standardizer(prep.stats)
     losses = Losses(g, d, norm, cfg)
     opt_g = torch.optim.Adam(g.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
-    opt_d = torch.optim.Adam(d.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
+    head = list(d.content_head.parameters()) if d.content_head is not None else []
+    body = [p for p in d.parameters() if all(p is not q for q in head)]
+    opt_d = torch.optim.Adam(body, lr=cfg.lr, betas=(0.5, 0.999))
+
+    def add_content_head_group() -> None:
+        opt_d.add_param_group({"params": head, "lr_scale": cfg.content_head_lr_scale})
+
     rng = np.random.default_rng(cfg.seed)
     step = 0
     if ckpt is not None:
         g.load_state_dict(ckpt["generator"])
-        d.load_state_dict(ckpt["discriminator"])
+        # a discriminator trained without content heads gets fresh ones
+        missing, unexpected = d.load_state_dict(ckpt["discriminator"], strict=False)
+        if unexpected or any(not k.startswith("content_head.") for k in missing):
+            raise SystemExit(f"discriminator weights do not fit: {missing} {unexpected}")
         opt_g.load_state_dict(ckpt["opt_g"])
+        if head and len(ckpt["opt_d"]["param_groups"]) > 1:
+            add_content_head_group()
         opt_d.load_state_dict(ckpt["opt_d"])
         step = int(ckpt["step"])
         rng.bit_generator.state = ckpt["numpy_rng"]
         torch.set_rng_state(ckpt["torch_rng"])
+    if head and len(opt_d.param_groups) == 1:
+        add_content_head_group()
 
     sampler = TD.Sampler(prep.train, cfg.window, rng)
     validator = Validator(prep, cfg, norm)
@@ -562,6 +632,7 @@ def train(
             "model_config": model_cfg.to_dict(),
             "train_config": asdict(cfg),
             "styles": prep.styles,
+            "contents": prep.contents,
             "val_takes": prep.val_takes,
             "stats": stats_to_dict(prep.stats),
             "generator": g.state_dict(),
@@ -593,7 +664,7 @@ def train(
         lr = lr_at(step, cfg)
         for opt in (opt_g, opt_d):
             for group in opt.param_groups:
-                group["lr"] = lr
+                group["lr"] = lr * group.get("lr_scale", 1.0)
         styles_m = sampler.random_styles(cfg.batch_size)
         items_m = sampler.pick(styles_m)
         items_n = sampler.pick(styles_m)
@@ -607,6 +678,8 @@ def train(
         m, n, x = (
             to_batch(TD.cut(it, cfg.window, rng), norm) for it in (items_m, items_n, items_x)
         )
+        for batch, items in ((m, items_m), (x, items_x)):
+            batch.label = torch.tensor([label_index.get(c.label, -1) for c, _ in items])
         r = None
         # x is content-matched; r is any style, or with w_raised_hands a style that never
         # performs m's content: styles that do are judged against their own takes
