@@ -125,20 +125,25 @@ def random_batch(batch: int, frames: int, styles: list[int]):
     )
 
 
-def test_content_cycle_translates_to_its_own_style_batch():
-    from training.translator import train as T
-
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
+def identity_stats() -> Fe.FeatureStats:
+    """Statistics that leave standardised features as they are."""
     kinds = {
         "content": Fe.CONTENT_CHANNELS,
         "style3d": Fe.STYLE3D_CHANNELS,
         "style2d": Fe.STYLE2D_CHANNELS,
     }
-    stats = Fe.FeatureStats(
+    return Fe.FeatureStats(
         {k: np.zeros(c, np.float32) for k, c in kinds.items()},
         {k: np.ones(c, np.float32) for k, c in kinds.items()},
     )
+
+
+def test_content_cycle_translates_to_its_own_style_batch():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    stats = identity_stats()
     g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
     m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
     off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_cycle=0.0))
@@ -197,12 +202,7 @@ def test_raised_hands_term_is_logged_only_when_weighted():
 
     torch.manual_seed(0)
     cfg = M.ModelConfig(num_styles=3)
-    kinds = {"content": Fe.CONTENT_CHANNELS, "style3d": Fe.STYLE3D_CHANNELS,
-             "style2d": Fe.STYLE2D_CHANNELS}  # fmt: skip
-    stats = Fe.FeatureStats(
-        {k: np.zeros(c, np.float32) for k, c in kinds.items()},
-        {k: np.ones(c, np.float32) for k, c in kinds.items()},
-    )
+    stats = identity_stats()
     g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
     m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
     m.positions[..., C.INDEX["Hand_L"] - 1, 1] = 50.0  # the content's left hand, far above
@@ -234,12 +234,7 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
 
     torch.manual_seed(0)
     cfg = M.ModelConfig(num_styles=3, num_contents=4)
-    kinds = {"content": Fe.CONTENT_CHANNELS, "style3d": Fe.STYLE3D_CHANNELS,
-             "style2d": Fe.STYLE2D_CHANNELS}  # fmt: skip
-    stats = Fe.FeatureStats(
-        {k: np.zeros(c, np.float32) for k, c in kinds.items()},
-        {k: np.ones(c, np.float32) for k, c in kinds.items()},
-    )
+    stats = identity_stats()
     g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
     scores, _ = d(torch.randn(2, Fe.STYLE3D_CHANNELS + Fe.OUTPUT_CHANNELS, 32))
     assert scores.shape[1] == 3 + 4  # style heads, then content heads
