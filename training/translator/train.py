@@ -584,8 +584,8 @@ def train(
     norm = Standardizer(prep.stats)
     losses = Losses(g, d, norm, cfg)
     opt_g = torch.optim.Adam(g.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
-    head = list(d.content_head.parameters()) if d.content_head is not None else []
-    body = [p for p in d.parameters() if all(p is not q for q in head)]
+    head = [p for name, p in d.named_parameters() if name.startswith("content_head.")]
+    body = [p for name, p in d.named_parameters() if not name.startswith("content_head.")]
     opt_d = torch.optim.Adam(body, lr=cfg.lr, betas=(0.5, 0.999))
 
     def add_content_head_group() -> None:
