@@ -346,7 +346,7 @@ class Losses:
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
             if wild is fake:
                 wild_pos = fake_pos
-            elif cfg.w_raised_hands > 0 or cfg.w_hand_amplitude > 0:
+            elif cfg.w_raised_hands > 0 or cfg.w_hand_amplitude > 0 or cfg.w_content_adv > 0:
                 wild_pos = self.positions(wild, m.hips_height)
         if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
@@ -360,7 +360,7 @@ class Losses:
                 amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos))
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
-            if wild_pos is not None and wild is not fake:
+            if wild is not None and wild is not fake:
                 wild_scores = self.d(self.disc_input(wild, wild_pos))[0]
                 wild_adv = -self.hinge_mean(self.pick_content(wild_scores, m.label))
                 content_adv = 0.5 * (content_adv + wild_adv)
