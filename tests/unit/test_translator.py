@@ -176,7 +176,7 @@ def test_hands_dropped_measures_raised_hands_that_end_below_the_head():
     assert T.hands_dropped(content[..., [0, 3], :, :], translation[..., [0, 3], :, :]) == 0.0
 
 
-def test_hand_amplitude_changed_allows_a_factor_of_two_either_way():
+def test_hand_amplitude_changed_allows_a_factor_of_two_either_way_by_default():
     from training.translator import train as T
 
     left, right = C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1
@@ -188,6 +188,7 @@ def test_hand_amplitude_changed_allows_a_factor_of_two_either_way():
     translation[..., left, 1] *= 0.6  # smaller, within a factor of two
     translation[..., right, 0] = 0.01 * wave  # the idle hand trembles under the floor
     assert T.hand_amplitude_changed(content, translation) == 0.0
+    assert T.hand_amplitude_changed(content, translation, ratio=1.25) > 0.0  # a tighter band
     translation[..., left, 1] = 0.3 * wave / 4  # a quarter: beyond the factor, on one hand
     a, floor = 0.3 * float(wave.std(unbiased=False)), 2.0 / Fe.LEG
     beyond = math.log((a + floor) / (a / 4 + floor)) - math.log(2.0)

@@ -105,9 +105,10 @@ class TrainConfig:
     w_cycle: float = 0.0
     # a hand the content window raises above the head stays above it in a translation to r
     w_raised_hands: float = 0.0
-    # each hand moves within a factor HAND_AMPLITUDE_RATIO as much as in the content window,
+    # each hand moves within a factor hand_amplitude_ratio as much as in the content window,
     # in the translations to x (and r)
     w_hand_amplitude: float = 0.0
+    hand_amplitude_ratio: float = 2.0
     # the discriminator's content heads judge whether a translation performs m's label
     w_content_adv: float = 0.0
     content_head_lr_scale: float = 10.0  # a head added to a trained discriminator catches up
@@ -248,13 +249,14 @@ def hands_dropped(content: torch.Tensor, translation: torch.Tensor) -> torch.Ten
     return (F.relu(-height) * raised).sum() / raised.sum().clamp_min(1.0)
 
 
-HAND_AMPLITUDE_RATIO = 2.0
 _AMPLITUDE_FLOOR = 2.0 / Fe.LEG  # 2 cm: a hand at rest jitters; below this it is still
 
 
-def hand_amplitude_changed(content: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
+def hand_amplitude_changed(
+    content: torch.Tensor, translation: torch.Tensor, ratio: float = 2.0
+) -> torch.Tensor:
     """How far (log ratio) each hand's amplitude of movement in the translation is from the
-    content's, beyond a factor ``HAND_AMPLITUDE_RATIO`` either way; mean over hands.
+    content's, beyond a factor ``ratio`` either way; mean over hands.
     Amplitude: root-local position's standard deviation over the window (``(B, T, 21, 3)``,
     leg lengths). Instance norm strips it from the content code, and translations of
     one-hand actions moved the idle hand 3-5x as fast as the content while the raised
@@ -264,8 +266,8 @@ def hand_amplitude_changed(content: torch.Tensor, translation: torch.Tensor) -> 
         hands = p[..., _HANDS, :]
         return hands.var(dim=1, unbiased=False).sum(-1).sqrt() + _AMPLITUDE_FLOOR
 
-    ratio = torch.log(amplitude(translation) / amplitude(content)).abs()
-    return F.relu(ratio - math.log(HAND_AMPLITUDE_RATIO)).mean()
+    log_ratio = torch.log(amplitude(translation) / amplitude(content)).abs()
+    return F.relu(log_ratio - math.log(ratio)).mean()
 
 
 class Losses:
@@ -355,9 +357,10 @@ class Losses:
         if cfg.w_raised_hands > 0:
             raised = hands_dropped(m.positions, wild_pos)
         if cfg.w_hand_amplitude > 0:
-            amplitude = hand_amplitude_changed(m.positions, fake_pos)
+            ratio = cfg.hand_amplitude_ratio
+            amplitude = hand_amplitude_changed(m.positions, fake_pos, ratio)
             if wild is not None and wild is not fake:
-                amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos))
+                amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos, ratio))
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
             if wild is not None and wild is not fake:
