@@ -576,15 +576,16 @@ def main(argv: list[str] | None = None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(reports, indent=1))
     if args.manifest:
+        from service.config import Settings
+
         for r in reports:
-            record_in_manifest(r)
+            record_in_manifest(r, Settings().models_dir)
     return 0
 
 
-def record_in_manifest(report: dict) -> None:
-    """The report's table (rows, takes, date) into its model's manifest entry."""
+def record_in_manifest(report: dict, models_dir: Path) -> None:
+    """The report's table (rows, takes, date) into its model's entry in ``models_dir``."""
     from model_export.manifest import put_evaluation
-    from service.config import Settings
 
     figures = {
         "held_out_takes": report["held_out_takes"],
@@ -601,7 +602,7 @@ def record_in_manifest(report: dict) -> None:
         report["model_version"],
         f"{report['takes_of']}_held_out_takes",
         figures,
-        Settings().models_dir,
+        models_dir,
     )
 
 
