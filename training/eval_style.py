@@ -58,7 +58,7 @@ import argparse
 import json
 import time
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -440,7 +440,8 @@ def evaluate(
     style_linear = ClipClassifier(train_feats, styles_of)
     style_conv = ConvClipClassifier(frames, styles_of)
     log(f"classifiers trained ({time.time() - started:.0f} s)")
-    judged: dict[tuple[str, int], Verdict] = {}
+    judged: dict[str, Verdict] = {}  # by take; the folded classifier's answer by take and fold
+    judged_all: dict[tuple[str, int], str] = {}
 
     def verdict(motion: Motion, fold: int) -> Verdict:
         f, per_frame = window_features(motion), frame_features(motion)
@@ -455,9 +456,12 @@ def evaluate(
         )
 
     def judge(take: str, motion: Motion, fold: int) -> Verdict:
-        if (take, fold) not in judged:
-            judged[take, fold] = verdict(motion, fold)
-        return judged[take, fold]
+        if take not in judged:
+            judged[take] = verdict(motion, fold)
+            judged_all[take, fold] = judged[take].content_all
+        if (take, fold) not in judged_all:
+            judged_all[take, fold] = content_all.predict(frame_features(motion), fold)
+        return replace(judged[take], content_all=judged_all[take, fold])
 
     names = ("real held-out", "unchanged", "real target", family,
              f"{family} (pairs with a real target)")  # fmt: skip
