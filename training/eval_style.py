@@ -44,6 +44,10 @@ content. Baselines, judged by the same classifiers:
   (from the family's training takes, which the classifiers never saw), where one exists;
 - ``real held-out``: each held-out clip against its own labels (the classifiers' ceiling).
 
+The transfers and real targets are also split by action, hand actions (raise, wave) and
+the rest, and the transfers by whether a real target exists: to the twelve styles that
+never raise or wave a hand in Bandai none does, and only the classifiers judge them.
+
 Foot skating is foot sliding as Zhang et al. (2018) measure it, in cm/s: feet and toes'
 horizontal speed weighted by how close they are to the clip's ground (within 2.5 cm), so
 it needs no contact labels and judges generated and real clips alike.
@@ -465,7 +469,10 @@ def evaluate(
 
     names = ("real held-out", "unchanged", "real target", family,
              f"{family} (pairs with a real target)")  # fmt: skip
-    rows = {k: Tally() for k in names}
+    # where the gap is: hand actions (raise, wave) and the rest, with and without a real target
+    splits = [f"{w}: {a}" for w in ("real target", f"{family} (pairs)",
+              f"{family} (no real target)") for a in ("hand actions", "other actions")]  # fmt: skip
+    rows = {k: Tally() for k in (*names, *splits)}
     per_style: dict[str, Tally] = {s: Tally() for s in styles}
     per_style_real: dict[str, Tally] = {s: Tally() for s in styles}
     test = held_list[:limit] if limit else held_list
@@ -482,10 +489,15 @@ def evaluate(
             out = verdict(transfer(family, engine, second, s), fold)
             rows[family].add(out, s, x.content)
             per_style[s].add(out, s, x.content)
-            if real is not None:
+            actions = "hand actions" if raises_a_hand(x.content) else "other actions"
+            if real is None:
+                rows[f"{family} (no real target): {actions}"].add(out, s, x.content)
+            else:
                 rows[f"{family} (pairs with a real target)"].add(out, s, x.content)
+                rows[f"{family} (pairs): {actions}"].add(out, s, x.content)
                 real_verdict = judge(real.take, halves(real.motion)[1], fold)
                 rows["real target"].add(real_verdict, s, x.content)
+                rows[f"real target: {actions}"].add(real_verdict, s, x.content)
                 per_style_real[s].add(real_verdict, s, x.content)
         log(
             f"[{family}] {i + 1}/{len(test)} {x.take}: "
@@ -523,6 +535,8 @@ def markdown(report: dict) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in report["rows"].items():
+        if not row["n"]:
+            continue
         skate = "-" if row["foot_skating_cm_s"] is None else f"{row['foot_skating_cm_s']:.1f}"
         conv = row.get("content_accuracy_conv")
         conv = "-" if conv is None else f"{conv:.1%}"

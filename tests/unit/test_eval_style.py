@@ -92,9 +92,11 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     report = {
         "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
         "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
-        "rows": {"translator": row}, "per_style": {}, "per_style_real_target": {},
+        "rows": {"translator": row, "translator (pairs): hand actions": ES.Tally().summary()},
+        "per_style": {}, "per_style_real_target": {},
     }  # fmt: skip
     table = ES.markdown(report)
+    assert "hand actions" not in table  # a split no clip fell into is left out, not a crash
     assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
     assert "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 3.0 | +12.5 (1) |" in table
 
