@@ -180,3 +180,15 @@ def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk):
     feeds = {i.name: np.zeros([3 if d == "batch" else d for d in i.shape], np.float32)
              for i in session.get_inputs()}  # fmt: skip
     assert session.run(None, feeds)[0].shape == (3, DF.MOTION_CHANNELS)
+
+
+def test_evaluation_energy_blocks_are_whole_30_second_blocks():
+    from training import eval_dance as ED
+
+    fps = 30.0
+    block = int(ED.BLOCK * fps)
+    # three whole blocks at 10, 40 and 25 cm/s, then a partial one that must be left out
+    speed = np.concatenate([np.full(block, v) for v in (10.0, 40.0, 25.0)] + [np.zeros(100)])
+    figures = ED.energy_blocks(speed, fps)
+    assert figures == {"per_30s_min": 10.0, "per_30s_max": 40.0, "first_30s": 10.0,
+                       "last_30s": 25.0}  # fmt: skip
