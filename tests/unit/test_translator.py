@@ -179,23 +179,26 @@ def test_hands_dropped_measures_raised_hands_that_end_below_the_head():
 def test_hand_amplitude_changed_allows_a_factor_of_two_either_way_by_default():
     from training.translator import train as T
 
+    default = T.TrainConfig().hand_amplitude_ratio
     left, right = C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1
     content = torch.zeros(1, 32, 21, 3)
     wave = torch.sin(torch.linspace(0, 2 * math.pi, 32))
     content[..., left, 1] = 0.3 * wave  # the left hand moves, the right is still
-    assert T.hand_amplitude_changed(content, content) == 0.0
+    assert T.hand_amplitude_changed(content, content, default) == 0.0
     translation = content.clone()
     translation[..., left, 1] *= 0.6  # smaller, within a factor of two
     translation[..., right, 0] = 0.01 * wave  # the idle hand trembles under the floor
-    assert T.hand_amplitude_changed(content, translation) == 0.0
+    assert T.hand_amplitude_changed(content, translation, default) == 0.0
     assert T.hand_amplitude_changed(content, translation, ratio=1.25) > 0.0  # a tighter band
     translation[..., left, 1] = 0.3 * wave / 4  # a quarter: beyond the factor, on one hand
     a, floor = 0.3 * float(wave.std(unbiased=False)), 2.0 / Fe.LEG
     beyond = math.log((a + floor) / (a / 4 + floor)) - math.log(2.0)
-    assert T.hand_amplitude_changed(content, translation) == pytest.approx(beyond / 2, rel=1e-4)
+    assert T.hand_amplitude_changed(content, translation, default) == pytest.approx(
+        beyond / 2, rel=1e-4
+    )
     translation = content.clone()
     translation[..., right, 0] = 0.2 * wave  # the idle hand swings
-    assert T.hand_amplitude_changed(content, translation) > 0.5
+    assert T.hand_amplitude_changed(content, translation, default) > 0.5
 
 
 def test_raised_hands_term_is_logged_only_when_weighted():
@@ -225,7 +228,8 @@ def test_raised_hands_term_is_logged_only_when_weighted():
         fake_pos = amp.positions(fake, m.hips_height)
     assert logs_off["hand_amplitude"] == 0.0 and logs_amp["hand_amplitude"] > 0.0
     assert logs_amp["hand_amplitude"] == pytest.approx(
-        float(T.hand_amplitude_changed(m.positions, fake_pos)), rel=1e-5
+        float(T.hand_amplitude_changed(m.positions, fake_pos, amp.cfg.hand_amplitude_ratio)),
+        rel=1e-5,
     )  # no w_cycle or w_raised_hands: no translation to r is made
     assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)
 

@@ -253,7 +253,7 @@ _AMPLITUDE_FLOOR = 2.0 / Fe.LEG  # 2 cm: a hand at rest jitters; below this it i
 
 
 def hand_amplitude_changed(
-    content: torch.Tensor, translation: torch.Tensor, ratio: float = 2.0
+    content: torch.Tensor, translation: torch.Tensor, ratio: float
 ) -> torch.Tensor:
     """How far (log ratio) each hand's amplitude of movement in the translation is from the
     content's, beyond a factor ``ratio`` either way; mean over hands.
