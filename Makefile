@@ -70,10 +70,10 @@ export-fast: $(VENV)/.dev
 # families side by side on the same takes (those held out from the translator's training).
 # Each records its figures in the model's manifest entry (metrics.evaluation).
 eval-fast: $(VENV)/.dev
-	$(PY) -m training.eval_style fast --json runs/eval/fast.json --manifest
+	$(PY) -m training.eval_style fast --json runs/eval/fast.json --manifest --classifier-cache runs/eval/classifiers
 
 eval-styles: $(VENV)/.dev
-	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json --manifest
+	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json --manifest --classifier-cache runs/eval/classifiers
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
@@ -105,7 +105,7 @@ export-translator: $(VENV)/.dev
 	$(PY) -m model_export.translator $(EXPORT_TRANSLATOR_ARGS)
 
 eval-translator: $(VENV)/.dev
-	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest
+	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest --classifier-cache runs/eval/classifiers
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
 # BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the

@@ -2,6 +2,7 @@
 networks): style and content recognition of their outputs, and foot skating.
 
     python -m training.eval_style translator|fast|all [--json PATH] [--limit N] [--no-mirror]
+        [--classifier-cache DIR] [--manifest]
 
 For a family, the held-out takes are the Bandai takes its training never saw (its bundle's
 ``split.json``): 51 takes for the translator, 73 for the fast networks, too few for a
@@ -59,7 +60,9 @@ the clips whose content raises or waves a hand: what a transfer keeps of those a
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
+import pickle
 import time
 import zlib
 from dataclasses import dataclass, field, replace
@@ -400,14 +403,84 @@ def halves(motion: Motion) -> tuple[Motion, Motion]:
     return motion.slice(0, mid), motion.slice(mid, motion.num_frames)
 
 
+@dataclass
+class Classifiers:
+    """The judges of one evaluation (see the module's docstring)."""
+
+    content: ClipClassifier
+    content_conv: ConvClipClassifier
+    content_all: FoldedClassifier
+    style_linear: ClipClassifier
+    style_conv: ConvClipClassifier
+
+
+def train_classifiers(held_list: list, training: list, mirror: bool = True) -> Classifiers:
+    """Classifiers of the held-out takes' first halves (``content_all``: and of the
+    ``training`` takes, in folds)."""
+    first = [halves(c.motion)[0] for c in held_list]
+    train_feats = [window_features(m) for m in first]
+    contents = [c.content for c in held_list]
+    styles_of = [c.style for c in held_list]
+    frames = [frame_features(m) for m in first]
+    content = ClipClassifier(train_feats, contents)
+    content_conv = ConvClipClassifier(frames, contents)
+    content_all = FoldedClassifier(
+        frames,
+        contents,
+        [frame_features(c.motion) for c in training],
+        [c.content for c in training],
+        [c.take for c in training],
+    )
+    if mirror:  # a style has no side: the mirror images double the style classifiers' data
+        train_feats = train_feats + [window_features(m, mirror=True) for m in first]
+        frames = frames + [frame_features(m, mirror=True) for m in first]
+        styles_of = styles_of + styles_of
+    return Classifiers(
+        content,
+        content_conv,
+        content_all,
+        ClipClassifier(train_feats, styles_of),
+        ConvClipClassifier(frames, styles_of),
+    )
+
+
+def classifiers_for(
+    held_list: list, training: list, mirror: bool, cache: Path | None = None
+) -> Classifiers:
+    """:func:`train_classifiers`, kept in ``cache`` (a folder) when given: about ten minutes
+    of a translator evaluation's thirteen on two cores. A kept set is used again only for
+    the same takes, labels and lengths and the same code of this module."""
+    if cache is None:
+        return train_classifiers(held_list, training, mirror)
+    key = hashlib.sha256(Path(__file__).read_bytes())
+    for group in (held_list, training):
+        takes = sorted((c.take, c.style, c.content, len(c.lrot)) for c in group)
+        key.update(json.dumps(takes).encode())
+    key.update(str(mirror).encode())
+    path = Path(cache) / f"classifiers-{key.hexdigest()[:16]}.pkl"
+    if path.exists():
+        with path.open("rb") as f:
+            return pickle.load(f)
+    classifiers = train_classifiers(held_list, training, mirror)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(".partial")
+    with partial.open("wb") as f:
+        pickle.dump(classifiers, f)
+    partial.replace(path)
+    return classifiers
+
+
 def evaluate(
     family: str,
     takes_of: str | None = None,
     limit: int | None = None,
     log=print,
     mirror: bool = True,
+    classifier_cache: Path | None = None,
 ) -> dict:
-    """The report of ``family`` on the held-out takes of ``takes_of`` (default its own)."""
+    """The report of ``family`` on the held-out takes of ``takes_of`` (default its own);
+    ``classifier_cache``: a folder keeping the trained classifiers (see
+    :func:`classifiers_for`)."""
     from training.data import load_bandai
 
     engine, entry, _ = load_engine(family)
@@ -423,27 +496,11 @@ def evaluate(
             real_of.setdefault((c.content, c.style), c)
 
     started = time.time()
-    first = [halves(c.motion)[0] for c in held_list]
-    train_feats = [window_features(m) for m in first]
-    content_clf = ClipClassifier(train_feats, [c.content for c in held_list])
-    styles_of = [c.style for c in held_list]
-    frames = [frame_features(m) for m in first]
-    content_conv = ConvClipClassifier(frames, [c.content for c in held_list])
     training = [c for c in clips if c.take not in held]
-    content_all = FoldedClassifier(
-        frames,
-        [c.content for c in held_list],
-        [frame_features(c.motion) for c in training],
-        [c.content for c in training],
-        [c.take for c in training],
-    )
-    if mirror:  # a style has no side: the mirror images double the style classifiers' data
-        train_feats = train_feats + [window_features(m, mirror=True) for m in first]
-        frames = frames + [frame_features(m, mirror=True) for m in first]
-        styles_of = styles_of + styles_of
-    style_linear = ClipClassifier(train_feats, styles_of)
-    style_conv = ConvClipClassifier(frames, styles_of)
-    log(f"classifiers trained ({time.time() - started:.0f} s)")
+    clf = classifiers_for(held_list, training, mirror, classifier_cache)
+    content_clf, content_conv, content_all = clf.content, clf.content_conv, clf.content_all
+    style_linear, style_conv = clf.style_linear, clf.style_conv
+    log(f"classifiers ready ({time.time() - started:.0f} s)")
     judged: dict[str, Verdict] = {}  # by take; the folded classifier's answer by take and fold
     judged_all: dict[tuple[str, int], str] = {}
 
@@ -579,6 +636,13 @@ def main(argv: list[str] | None = None) -> int:
         help="train the style classifier without the mirror images of the held-out takes",
     )
     p.add_argument(
+        "--classifier-cache",
+        type=Path,
+        default=None,
+        help="keep the trained classifiers in this folder and use them again while the "
+        "takes and this module's code are the same",
+    )
+    p.add_argument(
         "--manifest",
         action="store_true",
         help="also record each report's figures in the model's manifest entry "
@@ -586,7 +650,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     families = FAMILIES if args.family == "all" else (args.family,)
-    reports = [evaluate(f, args.takes, args.limit, mirror=not args.no_mirror) for f in families]
+    reports = [
+        evaluate(
+            f, args.takes, args.limit, mirror=not args.no_mirror,
+            classifier_cache=args.classifier_cache,
+        )
+        for f in families
+    ]  # fmt: skip
     for r in reports:
         print()
         print(markdown(r))

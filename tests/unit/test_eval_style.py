@@ -120,3 +120,39 @@ def test_folded_classifier_judges_a_take_with_networks_that_never_saw_it():
     assert "unique" not in clf.classifiers[own].classes
     assert all("unique" in clf.classifiers[k].classes for k in range(3) if k != own)
     assert clf.predict(features[1], own) in clf.classifiers[own].classes
+
+
+def test_classifiers_are_kept_and_trained_again_only_for_other_takes(tmp_path, monkeypatch):
+    from training.data import Clip
+
+    monkeypatch.setattr(ES.ConvClipClassifier.__init__, "__defaults__", ((0,), 5))  # quick
+    trained = []
+    train = ES.train_classifiers
+    monkeypatch.setattr(ES, "train_classifiers", lambda *a: trained.append(a) or train(*a))
+    canon = retarget.to_canonical(bvh.load(FIXTURE))
+
+    def clip(take: str, style: str, content: str) -> Clip:
+        return Clip(take, "test", take, canon.lrot, canon.lpos[:, 1], style, content)
+
+    held = [clip(f"h{i}", "ab"[i % 2], ("walk", "run")[i // 2]) for i in range(4)]
+    training = [clip(f"t{i}", "ab"[i % 2], ("walk", "run")[i // 2]) for i in range(4)]
+    first = ES.classifiers_for(held, training, True, tmp_path)
+    again = ES.classifiers_for(held, training, True, tmp_path)
+    assert len(trained) == 1 and len(list(tmp_path.glob("classifiers-*.pkl"))) == 1
+    x = ES.frame_features(held[0].motion)
+    for net, kept in zip(first.style_conv.nets, again.style_conv.nets, strict=True):
+        assert torch_equal(net, kept)
+    ES.classifiers_for(held[1:] + [clip("h0", "b", "walk")], training, True, tmp_path)  # label
+    ES.classifiers_for(held, training[:3], True, tmp_path)  # takes
+    ES.classifiers_for(held, training, False, tmp_path)  # no mirrors
+    assert len(trained) == 4 and len(list(tmp_path.glob("classifiers-*.pkl"))) == 4
+    assert again.content_all.predict(x, 0) in {"walk", "run"}
+    ES.classifiers_for(held, training, True, None)  # no cache: trains
+    assert len(trained) == 5
+
+
+def torch_equal(a, b) -> bool:
+    return all(
+        (p == q).all()
+        for p, q in zip(a.state_dict().values(), b.state_dict().values(), strict=True)
+    )
