@@ -59,8 +59,9 @@ def test_root_local_fk_gives_the_3d_style_features(bandai_clips):
 
 @pytest.mark.parametrize("frames", [4, 32, 37, 61, 64])
 @pytest.mark.parametrize("batch", [1, 3])
-def test_network_shapes(frames, batch):
-    cfg = M.ModelConfig(num_styles=5)
+@pytest.mark.parametrize("keep_amplitude", [False, True])
+def test_network_shapes(frames, batch, keep_amplitude):
+    cfg = M.ModelConfig(num_styles=5, keep_amplitude=keep_amplitude)
     g, d = M.Translator(cfg).eval(), M.Discriminator(cfg)
     content = M.pad_time(torch.randn(batch, Fe.CONTENT_CHANNELS, frames))
     padded = content.shape[-1]
@@ -110,6 +111,39 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     assert [group.get("lr_scale", 1.0) for group in headed["opt_d"]["param_groups"]] == [1.0, 10.0]
     T.main(args + ["--resume"])  # and go on with them
     assert torch.load(ckpt, map_location="cpu", weights_only=False)["step"] == 12
+    # kept amplitudes join a generator trained without them, calibrated, with their own group
+    T.main(args + ["--resume", "--keep-amplitude"])
+    kept = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert kept["step"] == 15 and kept["model_config"]["keep_amplitude"]
+    refs = [v for k, v in kept["generator"].items() if k.endswith(".log_ref")]
+    assert len(refs) == 9 and all(float(r.abs().max()) > 0 for r in refs)
+    assert [group.get("lr_scale", 1.0) for group in kept["opt_g"]["param_groups"]] == [1.0, 10.0]
+    T.main(args + ["--resume"])
+    again = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert again["step"] == 18 and again["model_config"]["keep_amplitude"]
+
+
+def test_kept_amplitude_starts_as_instance_norm_and_can_hand_on_a_spans_amplitude():
+    torch.manual_seed(0)
+    wave = torch.sin(torch.arange(64.0) / 2.0)
+    x = torch.stack([wave * torch.where(torch.arange(64) < 32, 0.2, 2.0), wave])[None]  # (1, 2, 64)
+    norm = M.Norm(2, keep_amplitude=True)
+    plain = torch.nn.functional.instance_norm(x)
+    assert torch.allclose(norm(x), plain, atol=1e-6)  # keep = tanh(0) = 0
+    with torch.no_grad():
+        norm.keep.fill_(10.0)  # tanh: keep all of it
+    kept = norm(x)
+    quiet, loud = kept[0, 0, 8:24].abs().max(), kept[0, 0, 40:56].abs().max()
+    plain_ratio = plain[0, 0, 40:56].abs().max() / plain[0, 0, 8:24].abs().max()
+    assert loud / quiet > 5 * plain_ratio  # the loud second stays louder than instance norm says
+    # calibrating sets each reference to the layer's usual spread, then stops
+    g = M.Translator(M.ModelConfig(num_styles=3, keep_amplitude=True))
+    M.calibrate_amplitude(
+        g, torch.randn(4, Fe.CONTENT_CHANNELS, 32), torch.randn(4, Fe.STYLE3D_CHANNELS, 32)
+    )
+    refs = [m.log_ref for m in g.modules() if isinstance(m, M.Norm)]
+    assert len(refs) == 9 and all(float(r.detach().abs().max()) > 0 for r in refs)
+    assert not any(m.calibrating for m in g.modules() if isinstance(m, M.Norm))
 
 
 def random_batch(batch: int, frames: int, styles: list[int]):
@@ -199,6 +233,26 @@ def test_hand_amplitude_changed_allows_a_factor_of_two_either_way_by_default():
     translation = content.clone()
     translation[..., right, 0] = 0.2 * wave  # the idle hand swings
     assert T.hand_amplitude_changed(content, translation, default) > 0.5
+
+
+def test_hand_speed_changed_tells_a_held_raise_from_a_wave():
+    from training.translator import train as T
+
+    ratio = T.TrainConfig().hand_speed_ratio
+    left = C.INDEX["Hand_L"] - 1
+    t = torch.linspace(0, 1, 32)
+    raise_ = torch.zeros(1, 32, 21, 3)
+    raise_[..., left, 1] = 0.5 * (t / 0.3).clamp(max=1.0)  # up in 0.3 s, then held
+    wave = raise_.clone()
+    wave[..., left, 0] = 0.15 * torch.sin(2 * math.pi * 2.5 * t)  # and swung side to side
+    assert T.hand_speed_changed(raise_, raise_, ratio) == 0.0
+    slower = raise_.clone()
+    slower[..., left, 1] = 0.5 * (t / 0.4).clamp(max=1.0)  # up in 0.4 s: a style's pace
+    assert T.hand_speed_changed(raise_, slower, ratio) == 0.0
+    assert T.hand_speed_changed(raise_, wave, ratio) > 0.1  # a raise turned into a wave
+    assert T.hand_speed_changed(wave, raise_, ratio) > 0.1  # and back
+    # the amplitude term alone barely tells them apart
+    assert T.hand_amplitude_changed(raise_, wave, T.TrainConfig().hand_amplitude_ratio) == 0.0
 
 
 def test_raised_hands_term_is_logged_only_when_weighted():

@@ -3,6 +3,7 @@ torch, the receptive field, the style table, and the shipped bundle in ``models/
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -70,6 +71,18 @@ def test_parity_with_torch_at_several_lengths_and_batches(tiny):
         assert fig["max_abs"] < X.ATOL, (graph, fig)
     assert {32, 64, 256} <= set(X.PARITY_LENGTHS) and any(t % 4 for t in X.PARITY_LENGTHS)
     assert set(X.PARITY_BATCHES) == {1, 3}
+
+
+def test_parity_with_kept_amplitudes(tmp_path):
+    torch.manual_seed(1)
+    g = Translator(dataclasses.replace(tiny_config(), keep_amplitude=True)).eval()
+    with torch.no_grad():  # trained-looking: some amplitude kept, references off zero
+        for name, p in g.named_parameters():
+            if name.endswith((".keep", ".log_ref")):
+                p.normal_(0.0, 0.5)
+    paths = X.export_graphs(g, tmp_path)
+    figures = X.parity(g, paths)  # raises outside rtol 1e-4 / atol 5e-5
+    assert all(fig["max_abs"] < X.ATOL for fig in figures.values()), figures
 
 
 def test_parity_check_catches_a_wrong_graph(tiny, tmp_path):

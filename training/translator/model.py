@@ -42,6 +42,7 @@ class ModelConfig:
     disc_channels: list[int] = field(default_factory=lambda: [96, 128, 160])
     num_contents: int = 0  # > 0: the discriminator also judges each content label
     kernel: int = 5
+    keep_amplitude: bool = False  # every instance norm may learn to keep some of x's amplitude
 
     @property
     def content_down(self) -> int:
@@ -72,37 +73,86 @@ def conv(c_in: int, c_out: int, kernel: int, stride: int = 1) -> nn.Conv1d:
     return nn.Conv1d(c_in, c_out, 2 * stride, stride=stride, padding=stride // 2)
 
 
+NORM_EPS = 1e-5  # F.instance_norm's
+AMPLITUDE_FRAMES = 32  # about a second at 30 fps: the span a kept amplitude is measured over
+MAX_LOG_AMPLITUDE = 3.0  # a span's amplitude counts up to e**3 times its channel's usual one
+
+
+class Norm(nn.Module):
+    """Instance norm over time. With ``keep_amplitude`` it may learn to hand some of the
+    input's own amplitude on: ``instance_norm(x) * (sigma_t / ref) ** keep`` per channel,
+    ``sigma_t`` the spread of ``x`` about its mean over about a second around frame t,
+    ``keep = tanh(k)`` starting at 0 (plain instance norm), ``ref`` the channel's usual
+    spread (see :func:`calibrate_amplitude`). Plain instance norm strips how far each
+    channel moves, and for a wave or a raise that is the content. ``level``: the layer
+    runs at ``30 / 2**level`` fps. Measured over a second rather than the whole input, so
+    training windows and whole clips see the same spans."""
+
+    def __init__(self, channels: int, keep_amplitude: bool, level: int = 0) -> None:
+        super().__init__()
+        self.keep = nn.Parameter(torch.zeros(channels)) if keep_amplitude else None
+        self.log_ref = nn.Parameter(torch.zeros(channels)) if keep_amplitude else None
+        self.span = (AMPLITUDE_FRAMES >> level) - 1  # odd, so it centres on the frame
+        self.calibrating = False
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = F.instance_norm(x)
+        if self.keep is None:
+            return y
+        centred = x - x.mean(dim=-1, keepdim=True)
+        local_var = F.avg_pool1d(
+            centred * centred, self.span, stride=1, padding=self.span // 2,
+            count_include_pad=False,
+        )  # fmt: skip
+        log_sigma = 0.5 * torch.log(local_var + NORM_EPS)
+        if self.calibrating:
+            with torch.no_grad():
+                self.log_ref.copy_(log_sigma.mean(dim=(0, 2)))
+        ratio = (log_sigma - self.log_ref.unsqueeze(-1)).clamp(
+            -MAX_LOG_AMPLITUDE, MAX_LOG_AMPLITUDE
+        )
+        return y * torch.exp(torch.tanh(self.keep).unsqueeze(-1) * ratio)
+
+
 def adain(x: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor) -> torch.Tensor:
-    """``instance_norm(x) * scale + shift``; ``x (B, C, T)``, ``scale``/``shift (B, C)``."""
-    return F.instance_norm(x) * scale.unsqueeze(-1) + shift.unsqueeze(-1)
+    """``x * scale + shift`` for a normalised ``x (B, C, T)``; ``scale``/``shift (B, C)``."""
+    return x * scale.unsqueeze(-1) + shift.unsqueeze(-1)
 
 
 class ResBlock(nn.Module):
     """Two convolutions with instance norm and a skip (content encoder)."""
 
-    def __init__(self, channels: int, kernel: int) -> None:
+    def __init__(
+        self, channels: int, kernel: int, keep_amplitude: bool = False, level: int = 0
+    ) -> None:
         super().__init__()
         self.conv1 = conv(channels, channels, kernel)
         self.conv2 = conv(channels, channels, kernel)
+        self.norm1 = Norm(channels, keep_amplitude, level)
+        self.norm2 = Norm(channels, keep_amplitude, level)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        h = F.leaky_relu(F.instance_norm(self.conv1(x)), 0.2)
-        return x + F.instance_norm(self.conv2(h))
+        h = F.leaky_relu(self.norm1(self.conv1(x)), 0.2)
+        return x + self.norm2(self.conv2(h))
 
 
 class AdaResBlock(nn.Module):
     """Two convolutions with AdaIN and a skip (decoder); ``params (B, 4 * C)``."""
 
-    def __init__(self, channels: int, kernel: int) -> None:
+    def __init__(
+        self, channels: int, kernel: int, keep_amplitude: bool = False, level: int = 0
+    ) -> None:
         super().__init__()
         self.channels = channels
         self.conv1 = conv(channels, channels, kernel)
         self.conv2 = conv(channels, channels, kernel)
+        self.norm1 = Norm(channels, keep_amplitude, level)
+        self.norm2 = Norm(channels, keep_amplitude, level)
 
     def forward(self, x: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
         s1, b1, s2, b2 = params.split(self.channels, dim=1)
-        h = F.leaky_relu(adain(self.conv1(x), 1.0 + s1, b1), 0.2)
-        return x + adain(self.conv2(h), 1.0 + s2, b2)
+        h = F.leaky_relu(adain(self.norm1(self.conv1(x)), 1.0 + s1, b1), 0.2)
+        return x + adain(self.norm2(self.conv2(h)), 1.0 + s2, b2)
 
 
 class ContentEncoder(nn.Module):
@@ -119,13 +169,17 @@ class ContentEncoder(nn.Module):
             conv(a, b, cfg.kernel, stride=2) for a, b in zip(chans[:-1], chans[1:], strict=True)
         )
         self.res = nn.ModuleList(
-            ResBlock(chans[-1], cfg.kernel) for _ in range(cfg.content_resblocks)
+            ResBlock(chans[-1], cfg.kernel, cfg.keep_amplitude, cfg.content_down)
+            for _ in range(cfg.content_resblocks)
+        )
+        self.norms = nn.ModuleList(
+            Norm(c, cfg.keep_amplitude, level) for level, c in enumerate(chans)
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        h = F.leaky_relu(F.instance_norm(self.first(x)), 0.2)
-        for layer in self.down:
-            h = F.leaky_relu(F.instance_norm(layer(h)), 0.2)
+        h = F.leaky_relu(self.norms[0](self.first(x)), 0.2)
+        for layer, norm in zip(self.down, self.norms[1:], strict=True):
+            h = F.leaky_relu(norm(layer(h)), 0.2)
         for block in self.res:
             h = block(h)
         return h
@@ -163,10 +217,14 @@ class Decoder(nn.Module):
         super().__init__()
         chans = cfg.content_channels[::-1]
         self.res = nn.ModuleList(
-            AdaResBlock(chans[0], cfg.kernel) for _ in range(cfg.decoder_resblocks)
+            AdaResBlock(chans[0], cfg.kernel, cfg.keep_amplitude, cfg.content_down)
+            for _ in range(cfg.decoder_resblocks)
         )
         self.up = nn.ModuleList(
             conv(a, b, cfg.kernel) for a, b in zip(chans[:-1], chans[1:], strict=True)
+        )
+        self.up_norms = nn.ModuleList(
+            Norm(c, cfg.keep_amplitude, cfg.content_down - 1 - i) for i, c in enumerate(chans[1:])
         )
         self.last = conv(chans[-1], cfg.output, cfg.kernel)
         # AdaIN parameter count per layer, in the order forward consumes them
@@ -184,10 +242,10 @@ class Decoder(nn.Module):
         h = content
         for block, p in zip(self.res, params, strict=False):
             h = block(h, p)
-        for layer, p in zip(self.up, params[len(self.res) :], strict=True):
+        for layer, norm, p in zip(self.up, self.up_norms, params[len(self.res) :], strict=True):
             h = F.interpolate(h, scale_factor=2.0, mode="nearest")
             scale, shift = p.split(p.shape[1] // 2, dim=1)
-            h = F.leaky_relu(adain(layer(h), 1.0 + scale, shift), 0.2)
+            h = F.leaky_relu(adain(norm(layer(h)), 1.0 + scale, shift), 0.2)
         return self.last(h)
 
 
@@ -237,6 +295,20 @@ class Translator(nn.Module):
         """Content ``(B, content_in, T)`` restyled by a 3D style clip ``(B, style3d_in, T2)``;
         both ``T`` multiples of ``STRIDE``."""
         return self.decoder(self.content_encoder(content), self.style3d(style3d))
+
+
+@torch.no_grad()
+def calibrate_amplitude(g: Translator, content: torch.Tensor, style3d: torch.Tensor) -> None:
+    """Set every :class:`Norm`'s reference amplitude to its mean over a batch, so that
+    learning to keep amplitude starts from no change in scale on average."""
+    norms = [m for m in g.modules() if isinstance(m, Norm) and m.keep is not None]
+    for m in norms:
+        m.calibrating = True
+    try:
+        g(content, style3d)
+    finally:
+        for m in norms:
+            m.calibrating = False
 
 
 def count_parameters(module: nn.Module) -> int:

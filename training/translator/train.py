@@ -26,6 +26,8 @@ One step, for a batch of B content windows ``m`` (style s):
   factor of two as much as in m (``hand_amplitude_changed``; not in the paper): they had
   swung the idle hand of one-hand actions and shrunk the raised one, and the content
   classifier took raises for waves.
+- with ``w_hand_speed``: the same for each hand's mean speed (``hand_speed_changed``; not
+  in the paper): a wave keeps the hand moving where a raise holds it.
 - with ``w_content_adv``: the discriminator also has a head per content label (``walk``,
   ``raise-up-left-hand``...), trained like the style heads on real windows of that label
   (any style) against translations of content windows with that label; the translations
@@ -72,12 +74,15 @@ from training.translator.model import (
     Discriminator,
     ModelConfig,
     Translator,
+    calibrate_amplitude,
     count_parameters,
 )
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_CHECKPOINT = REPO / "checkpoints" / "translator.pt"
 DEFAULT_LOG_DIR = REPO / "runs" / "translator"
+AMPLITUDE_PARAMETERS = (".keep", ".log_ref")  # what ModelConfig.keep_amplitude adds
+CALIBRATION_WINDOWS = 256
 
 
 @dataclass
@@ -109,9 +114,14 @@ class TrainConfig:
     # in the translations to x (and r)
     w_hand_amplitude: float = 0.0
     hand_amplitude_ratio: float = 2.0
+    # each hand's mean speed within a factor hand_speed_ratio of the content window's, in
+    # the same translations
+    w_hand_speed: float = 0.0
+    hand_speed_ratio: float = 1.5
     # the discriminator's content heads judge whether a translation performs m's label
     w_content_adv: float = 0.0
     content_head_lr_scale: float = 10.0  # a head added to a trained discriminator catches up
+    amplitude_lr_scale: float = 10.0  # the same for what keep_amplitude adds to a generator
     triplet_margin: float = 5.0
     w_r1: float = 1.0
     r1_every: int = 4
@@ -266,8 +276,31 @@ def hand_amplitude_changed(
         hands = p[..., _HANDS, :]
         return hands.var(dim=1, unbiased=False).sum(-1).sqrt() + _AMPLITUDE_FLOOR
 
-    log_ratio = torch.log(amplitude(translation) / amplitude(content)).abs()
-    return F.relu(log_ratio - math.log(ratio)).mean()
+    return _beyond(amplitude(translation) / amplitude(content), ratio)
+
+
+_SPEED_FLOOR = 3.0 / Fe.FPS / Fe.LEG  # 3 cm/s, per frame
+
+
+def hand_speed_changed(
+    content: torch.Tensor, translation: torch.Tensor, ratio: float
+) -> torch.Tensor:
+    """As :func:`hand_amplitude_changed`, for each hand's mean speed over the window. A raise
+    and a wave move a hand as far, but a wave keeps it moving: the content classifier took
+    translated raises for waves and waves for raises (47 of the 140 transfers of hand
+    actions to styles that perform them, in 0.1.50000; 16 of the real takes of those
+    actions in those styles)."""
+
+    def speed(p: torch.Tensor) -> torch.Tensor:
+        hands = p[..., _HANDS, :]
+        return (hands[:, 1:] - hands[:, :-1]).norm(dim=-1).mean(dim=1) + _SPEED_FLOOR
+
+    return _beyond(speed(translation) / speed(content), ratio)
+
+
+def _beyond(ratios: torch.Tensor, ratio: float) -> torch.Tensor:
+    """Mean of how far (log) ``ratios`` fall outside ``[1 / ratio, ratio]``."""
+    return F.relu(torch.log(ratios).abs() - math.log(ratio)).mean()
 
 
 class Losses:
@@ -338,7 +371,7 @@ class Losses:
             target = per_style[x.style]
         fm = F.l1_loss(feats.mean(dim=-1), target)
 
-        cycle, raised, amplitude = torch.zeros(()), torch.zeros(()), torch.zeros(())
+        cycle, raised, amplitude, speed = (torch.zeros(()) for _ in range(4))
         content_adv = torch.zeros(())
         wild = wild_pos = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
@@ -348,7 +381,12 @@ class Losses:
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
             if wild is fake:
                 wild_pos = fake_pos
-            elif cfg.w_raised_hands > 0 or cfg.w_hand_amplitude > 0 or cfg.w_content_adv > 0:
+            elif (
+                cfg.w_raised_hands > 0
+                or cfg.w_hand_amplitude > 0
+                or cfg.w_hand_speed > 0
+                or cfg.w_content_adv > 0
+            ):
                 wild_pos = self.positions(wild, m.hips_height)
         if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
@@ -361,6 +399,11 @@ class Losses:
             amplitude = hand_amplitude_changed(m.positions, fake_pos, ratio)
             if wild is not None and wild is not fake:
                 amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos, ratio))
+        if cfg.w_hand_speed > 0:
+            ratio = cfg.hand_speed_ratio
+            speed = hand_speed_changed(m.positions, fake_pos, ratio)
+            if wild is not None and wild is not fake:
+                speed = 0.5 * (speed + hand_speed_changed(m.positions, wild_pos, ratio))
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
             if wild is not None and wild is not fake:
@@ -383,12 +426,14 @@ class Losses:
             + cfg.w_cycle * cycle
             + cfg.w_raised_hands * raised
             + cfg.w_hand_amplitude * amplitude
+            + cfg.w_hand_speed * speed
             + ramp * cfg.w_content_adv * content_adv
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
             "joint": joint, "triplet": trip, "content_cycle": cycle,
-            "raised_hands_cm": raised * Fe.LEG, "hand_amplitude": amplitude, "content_adv_g": content_adv,
+            "raised_hands_cm": raised * Fe.LEG, "hand_amplitude": amplitude, "hand_speed": speed,
+            "content_adv_g": content_adv,
             "total_g": total,
         }  # fmt: skip
         return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
@@ -553,8 +598,10 @@ def train(
     resume: bool,
     max_steps: int | None,
     model_cfg: ModelConfig | None = None,
+    keep_amplitude: bool = False,
 ) -> dict:
-    """Train (or go on training) until ``cfg.steps``, or ``max_steps`` more steps."""
+    """Train (or go on training) until ``cfg.steps``, or ``max_steps`` more steps.
+    ``keep_amplitude`` turns :class:`Norm`'s kept amplitude on, for a resumed model too."""
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
@@ -569,6 +616,7 @@ def train(
                 f"checkpoint styles {ckpt['styles']} differ from the data's {prep.styles}"
             )
     model_cfg = model_cfg or ModelConfig()
+    model_cfg.keep_amplitude |= keep_amplitude
     model_cfg.num_styles = len(prep.styles)
     if cfg.w_content_adv > 0 and not model_cfg.num_contents:
         model_cfg.num_contents = len(prep.contents)
@@ -586,7 +634,12 @@ def train(
     g, d = Translator(model_cfg), Discriminator(model_cfg)
     norm = Standardizer(prep.stats)
     losses = Losses(g, d, norm, cfg)
-    opt_g = torch.optim.Adam(g.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
+    amplitude = [p for name, p in g.named_parameters() if name.endswith(AMPLITUDE_PARAMETERS)]
+    opt_g = torch.optim.Adam(
+        [p for name, p in g.named_parameters() if not name.endswith(AMPLITUDE_PARAMETERS)],
+        lr=cfg.lr,
+        betas=(0.5, 0.999),
+    )
     head = [p for name, p in d.named_parameters() if name.startswith("content_head.")]
     body = [p for name, p in d.named_parameters() if not name.startswith("content_head.")]
     opt_d = torch.optim.Adam(body, lr=cfg.lr, betas=(0.5, 0.999))
@@ -594,10 +647,20 @@ def train(
     def add_content_head_group() -> None:
         opt_d.add_param_group({"params": head, "lr_scale": cfg.content_head_lr_scale})
 
+    def add_amplitude_group() -> None:
+        opt_g.add_param_group({"params": amplitude, "lr_scale": cfg.amplitude_lr_scale})
+
     rng = np.random.default_rng(cfg.seed)
     step = 0
+    calibrate = bool(amplitude)
     if ckpt is not None:
-        g.load_state_dict(ckpt["generator"])
+        # a generator trained with plain instance norm gets fresh kept amplitudes
+        missing, unexpected = g.load_state_dict(ckpt["generator"], strict=False)
+        if unexpected or any(not k.endswith(AMPLITUDE_PARAMETERS) for k in missing):
+            raise SystemExit(f"generator weights do not fit: {missing} {unexpected}")
+        calibrate = bool(missing)
+        if amplitude and len(ckpt["opt_g"]["param_groups"]) > 1:
+            add_amplitude_group()
         # a discriminator trained without content heads gets fresh ones
         missing, unexpected = d.load_state_dict(ckpt["discriminator"], strict=False)
         if unexpected or any(not k.startswith("content_head.") for k in missing):
@@ -611,8 +674,14 @@ def train(
         torch.set_rng_state(ckpt["torch_rng"])
     if head and len(opt_d.param_groups) == 1:
         add_content_head_group()
+    if amplitude and len(opt_g.param_groups) == 1:
+        add_amplitude_group()
 
     sampler = TD.Sampler(prep.train, cfg.window, rng)
+    if calibrate:
+        items = sampler.pick(sampler.random_styles(CALIBRATION_WINDOWS))
+        batch = to_batch(TD.cut(items, cfg.window, rng), norm)
+        calibrate_amplitude(g, batch.content, batch.style3d)
     validator = Validator(prep, cfg, norm)
     run_config = {
         "model": model_cfg.to_dict(),
@@ -759,6 +828,12 @@ def main(argv: list[str] | None = None) -> None:
         help="torch intra-op threads (default 1: on shared cores more threads spin and run ~10x slower)",
     )
     parser.add_argument("--width", type=float, default=1.0, help="scale every channel count")
+    parser.add_argument(
+        "--keep-amplitude",
+        action="store_true",
+        help="let every instance norm learn to keep some of its input's amplitude "
+        "(a resumed model starts where it was)",
+    )
     args = parser.parse_args(argv)
 
     given = {
@@ -792,4 +867,6 @@ def main(argv: list[str] | None = None) -> None:
             style_dim=scale([base_model.style_dim])[0],
             mlp_hidden=scale([base_model.mlp_hidden])[0],
         )
-    train(cfg, args.checkpoint, args.log_dir, args.resume, max_steps, model_cfg)
+    train(
+        cfg, args.checkpoint, args.log_dir, args.resume, max_steps, model_cfg, args.keep_amplitude
+    )
