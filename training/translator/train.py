@@ -289,7 +289,9 @@ def hand_speed_changed(
     and a wave move a hand as far, but a wave keeps it moving: the content classifier took
     translated raises for waves and waves for raises (47 of the 140 transfers of hand
     actions to styles that perform them, in 0.1.50000; 16 of the real takes of those
-    actions in those styles)."""
+    actions in those styles). Measured, 3,000 steps with weight 4 from 0.1.53000: content
+    of all transfers 53.0 -> 51.9% (all-takes classifier), of hand actions with a real
+    target 55.0 -> 52.9%: not in the shipped schedule."""
 
     def speed(p: torch.Tensor) -> torch.Tensor:
         hands = p[..., _HANDS, :]
