@@ -396,16 +396,18 @@ class Losses:
             cycle = F.l1_loss(again, z_content.detach())
         if cfg.w_raised_hands > 0:
             raised = hands_dropped(m.positions, wild_pos)
+
+        def on_translations(term, ratio: float) -> torch.Tensor:
+            """``term`` of the translation to x, averaged with the one to r if there is one."""
+            value = term(m.positions, fake_pos, ratio)
+            if wild is not None and wild is not fake:
+                value = 0.5 * (value + term(m.positions, wild_pos, ratio))
+            return value
+
         if cfg.w_hand_amplitude > 0:
-            ratio = cfg.hand_amplitude_ratio
-            amplitude = hand_amplitude_changed(m.positions, fake_pos, ratio)
-            if wild is not None and wild is not fake:
-                amplitude = 0.5 * (amplitude + hand_amplitude_changed(m.positions, wild_pos, ratio))
+            amplitude = on_translations(hand_amplitude_changed, cfg.hand_amplitude_ratio)
         if cfg.w_hand_speed > 0:
-            ratio = cfg.hand_speed_ratio
-            speed = hand_speed_changed(m.positions, fake_pos, ratio)
-            if wild is not None and wild is not fake:
-                speed = 0.5 * (speed + hand_speed_changed(m.positions, wild_pos, ratio))
+            speed = on_translations(hand_speed_changed, cfg.hand_speed_ratio)
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
             if wild is not None and wild is not fake:
