@@ -20,7 +20,7 @@ from motion import bvh, retarget  # noqa: E402
 from motion import features as Fe  # noqa: E402
 from service.manifest import load_manifest, verify_files  # noqa: E402
 from tests.rigs import FIXTURE  # noqa: E402
-from training.translator.model import ModelConfig, Translator  # noqa: E402
+from training.translator.model import AMPLITUDE_PARAMETERS, ModelConfig, Translator  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -78,7 +78,7 @@ def test_parity_with_kept_amplitudes(tmp_path):
     g = Translator(dataclasses.replace(tiny_config(), keep_amplitude=True)).eval()
     with torch.no_grad():  # trained-looking: some amplitude kept, references off zero
         for name, p in g.named_parameters():
-            if name.endswith((".keep", ".log_ref")):
+            if name.endswith(AMPLITUDE_PARAMETERS):
                 p.normal_(0.0, 0.5)
     paths = X.export_graphs(g, tmp_path)
     figures = X.parity(g, paths)  # raises outside rtol 1e-4 / atol 5e-5

@@ -76,6 +76,7 @@ def conv(c_in: int, c_out: int, kernel: int, stride: int = 1) -> nn.Conv1d:
 NORM_EPS = 1e-5  # F.instance_norm's
 AMPLITUDE_FRAMES = 32  # about a second at 30 fps: the span a kept amplitude is measured over
 MAX_LOG_AMPLITUDE = 3.0  # a span's amplitude counts up to e**3 times its channel's usual one
+AMPLITUDE_PARAMETERS = (".keep", ".log_ref")  # the names' endings of what keep_amplitude adds
 
 
 class Norm(nn.Module):

@@ -70,6 +70,7 @@ from training import data as D
 from training.fk import RootLocalFK
 from training.translator import data as TD
 from training.translator.model import (
+    AMPLITUDE_PARAMETERS,
     STRIDE,
     Discriminator,
     ModelConfig,
@@ -81,7 +82,6 @@ from training.translator.model import (
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_CHECKPOINT = REPO / "checkpoints" / "translator.pt"
 DEFAULT_LOG_DIR = REPO / "runs" / "translator"
-AMPLITUDE_PARAMETERS = (".keep", ".log_ref")  # what ModelConfig.keep_amplitude adds
 CALIBRATION_WINDOWS = 256
 
 
