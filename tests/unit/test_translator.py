@@ -210,6 +210,22 @@ def test_hands_dropped_measures_raised_hands_that_end_below_the_head():
     assert T.hands_dropped(content[..., [0, 3], :, :], translation[..., [0, 3], :, :]) == 0.0
 
 
+def test_hands_lifted_measures_lowered_hands_that_end_above_the_head():
+    from training.translator import train as T
+
+    hand, head = C.INDEX["Hand_R"] - 1, C.INDEX["Head"] - 1
+    content = torch.zeros(1, 4, 21, 3)  # every other hand sits at 0, well below the head
+    content[..., head, 1] = 1.6
+    content[..., hand, 1] = torch.tensor([0.5, 1.55, 1.9, 0.5])  # near the face, then raised
+    translation = content.clone()
+    assert T.hands_lifted(content, translation) == 0.0
+    translation[..., hand, 1] = torch.tensor([1.8, 1.8, 1.8, 1.6])  # lifted in frame 0 only
+    # frames 0 and 3 count for this hand (frame 1 is within 10 cm of the head): 0.2 and 0;
+    # the other hand's 4 lowered frames stay at 0
+    assert T.hands_lifted(content, translation) == pytest.approx(0.2 / 6)
+    assert T.hands_lifted(translation, content) == 0.0  # the converse is hands_dropped's
+
+
 def test_hand_amplitude_changed_allows_a_factor_of_two_either_way_by_default():
     from training.translator import train as T
 
