@@ -55,6 +55,18 @@ it needs no contact labels and judges generated and real clips alike.
 
 Hand reach (cm) is how high the higher hand gets above the head (95th percentile), over
 the clips whose content raises or waves a hand: what a transfer keeps of those actions.
+
+Two measures of content need no classifier, so the styles and actions a classifier has
+seen together cannot sway them. Each compares a clip with the content clip it was made
+from:
+
+- hand use error: over hand actions, how much the share of frames each hand spends above
+  the head differs from the content's, averaged over both hands (a wave of the left hand
+  that also lifts the right one scores about 50%);
+- turning error: how far the degrees the body turns over the clip differ (a walk-turn
+  that goes straight scores about 45).
+
+The content classifiers also report their commonest confusions per row.
 """
 
 from __future__ import annotations
@@ -65,6 +77,7 @@ import json
 import pickle
 import time
 import zlib
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -80,6 +93,7 @@ REPO = Path(__file__).resolve().parent.parent
 WINDOW = 45  # frames (1.5 s at 30 fps)
 HOP = 15
 FAMILIES = ("translator", "fast")
+MISSED_SHOWN = 12  # the commonest content confusions reported per row
 
 
 # --------------------------------------------------------------------------- features
@@ -130,6 +144,21 @@ def hand_reach(motion: Motion) -> float:
     gpos = K.global_positions(motion)
     above = gpos[:, _HANDS, 1] - gpos[:, [_HEAD], 1]
     return float(np.percentile(above, 95, axis=0).max())
+
+
+def hands_up(motion: Motion) -> tuple[float, float]:
+    """The fraction of frames each hand (left, right) is above the head."""
+    gpos = K.global_positions(motion)
+    above = gpos[:, _HANDS, 1] > gpos[:, [_HEAD], 1]
+    return tuple(float(v) for v in above.mean(axis=0))
+
+
+def turning(motion: Motion) -> float:
+    """How far the body turns about the vertical over the clip, in degrees (signed)."""
+    gpos = K.global_positions(motion)
+    forward = K.facing_directions(gpos, *Fe.FACING_JOINTS)  # unsmoothed: ends stay whole
+    heading = np.unwrap(np.arctan2(forward[:, 0], forward[:, 2]))
+    return float(np.degrees(heading[-1] - heading[0]))
 
 
 def raises_a_hand(content: str) -> bool:
@@ -356,6 +385,8 @@ class Verdict:
     content_all: str
     skating: float
     hand_reach: float
+    hands_up: tuple[float, float]
+    turning: float
 
 
 @dataclass
@@ -367,16 +398,29 @@ class Tally:
     content_all: list[bool] = field(default_factory=list)
     skating: list[float] = field(default_factory=list)
     hand_reach: list[float] = field(default_factory=list)  # only clips of hand actions
+    # against the content clip: share of frames a hand is above the head (hand actions
+    # only), degrees turned
+    hand_use_error: list[float] = field(default_factory=list)
+    turning_error: list[float] = field(default_factory=list)
+    # (true content, what the all-takes classifier said) where they differ
+    missed: Counter = field(default_factory=Counter)
 
-    def add(self, verdict: Verdict, style: str, content: str) -> None:
+    def add(self, verdict: Verdict, style: str, content: str, source: Verdict) -> None:
+        """``verdict`` of a clip meant as ``content`` in ``style``; ``source``: the content
+        clip's own verdict."""
         self.style.append(verdict.style == style)
         self.style_linear.append(verdict.style_linear == style)
         self.content.append(verdict.content == content)
         self.content_conv.append(verdict.content_conv == content)
         self.content_all.append(verdict.content_all == content)
+        if verdict.content_all != content:
+            self.missed[content, verdict.content_all] += 1
         self.skating.append(verdict.skating)
+        self.turning_error.append(abs(verdict.turning - source.turning))
         if raises_a_hand(content):
             self.hand_reach.append(verdict.hand_reach)
+            error = np.abs(np.subtract(verdict.hands_up, source.hands_up)).mean()
+            self.hand_use_error.append(float(error))
 
     def summary(self) -> dict:
         def mean(xs: list) -> float | None:
@@ -393,6 +437,13 @@ class Tally:
             "foot_skating_cm_s": round(skate, 2) if skate is not None else None,
             "hand_actions": len(self.hand_reach),
             "hand_reach_cm": round(reach, 1) if reach is not None else None,
+            "hand_use_error": mean(self.hand_use_error),
+            "turning_error_deg": round(float(np.mean(self.turning_error)), 1)
+            if self.turning_error
+            else None,
+            "content_missed_all_takes": {
+                f"{a} -> {b}": k for (a, b), k in self.missed.most_common(MISSED_SHOWN)
+            },
         }
 
 
@@ -514,6 +565,8 @@ def evaluate(
             content_all.predict(per_frame, fold),
             skating(motion),
             hand_reach(motion),
+            hands_up(motion),
+            turning(motion),
         )
 
     def judge(take: str, motion: Motion, fold: int) -> Verdict:
@@ -535,27 +588,26 @@ def evaluate(
     test = held_list[:limit] if limit else held_list
     for i, x in enumerate(test):
         second = halves(x.motion)[1]
-        rows["real held-out"].add(
-            judge(x.take, second, content_all.fold_of(x.take)), x.style, x.content
-        )
+        own = judge(x.take, second, content_all.fold_of(x.take))
+        rows["real held-out"].add(own, x.style, x.content, own)
         for s in styles:
             real = real_of.get((x.content, s))
             # judged by the folded networks that never saw the real target's take
             fold = content_all.fold_of(real.take if real is not None else f"{x.take}>{s}")
-            rows["unchanged"].add(judge(x.take, second, fold), s, x.content)
+            rows["unchanged"].add(judge(x.take, second, fold), s, x.content, own)
             out = verdict(transfer(family, engine, second, s), fold)
-            rows[family].add(out, s, x.content)
-            per_style[s].add(out, s, x.content)
+            rows[family].add(out, s, x.content, own)
+            per_style[s].add(out, s, x.content, own)
             actions = "hand actions" if raises_a_hand(x.content) else "other actions"
             if real is None:
-                rows[f"{family} (no real target): {actions}"].add(out, s, x.content)
+                rows[f"{family} (no real target): {actions}"].add(out, s, x.content, own)
             else:
-                rows[f"{family} (pairs with a real target)"].add(out, s, x.content)
-                rows[f"{family} (pairs): {actions}"].add(out, s, x.content)
+                rows[f"{family} (pairs with a real target)"].add(out, s, x.content, own)
+                rows[f"{family} (pairs): {actions}"].add(out, s, x.content, own)
                 real_verdict = judge(real.take, halves(real.motion)[1], fold)
-                rows["real target"].add(real_verdict, s, x.content)
-                rows[f"real target: {actions}"].add(real_verdict, s, x.content)
-                per_style_real[s].add(real_verdict, s, x.content)
+                rows["real target"].add(real_verdict, s, x.content, own)
+                rows[f"real target: {actions}"].add(real_verdict, s, x.content, own)
+                per_style_real[s].add(real_verdict, s, x.content, own)
         log(
             f"[{family}] {i + 1}/{len(test)} {x.take}: "
             f"{rows[family].summary()} ({time.time() - started:.0f} s)"
@@ -588,8 +640,8 @@ def markdown(report: dict) -> str:
         "",
         "| output | n | style accuracy | style accuracy (linear) | content accuracy "
         "| content accuracy (conv) | content accuracy (all takes) | foot skating (cm/s) "
-        "| hand reach (cm, n) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| hand reach (cm, n) | hand use error | turning error (deg) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in report["rows"].items():
         if not row["n"]:
@@ -601,11 +653,20 @@ def markdown(report: dict) -> str:
         every = "-" if every is None else f"{every:.1%}"
         reach = row.get("hand_reach_cm")
         reach = "-" if reach is None else f"{reach:+.1f} ({row['hand_actions']})"
+        use, turn = row.get("hand_use_error"), row.get("turning_error_deg")
+        use = "-" if use is None else f"{use:.1%}"
+        turn = "-" if turn is None else f"{turn:.1f}"
         lines.append(
             f"| {name} | {row['n']} | {row['style_accuracy']:.1%} | "
             f"{row['style_accuracy_linear']:.1%} | {row['content_accuracy']:.1%} | "
-            f"{conv} | {every} | {skate} | {reach} |"
+            f"{conv} | {every} | {skate} | {reach} | {use} | {turn} |"
         )
+    lines += ["", "Commonest content confusions (all takes), true -> said: count", ""]
+    for name, row in report["rows"].items():
+        missed = row.get("content_missed_all_takes")
+        if row["n"] and missed:
+            shown = ", ".join(f"{k}: {v}" for k, v in missed.items())
+            lines.append(f"- {name}: {shown}")
     lines += [
         "",
         "| target style | transfers: style accuracy | real target: style accuracy (n) |",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from motion import bvh, retarget
 from motion import canonical as C
@@ -77,18 +78,27 @@ def test_hand_reach_is_how_far_the_higher_hand_gets_above_the_head():
 
 def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     t = ES.Tally()
-    t.add(ES.Verdict("angry", "sad", "walk", "run", "walk", 2.0, -30.0), "angry", "walk")
-    t.add(ES.Verdict("sad", "sad", "run", "run", "walk", 4.0, -40.0), "angry", "run")
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 10.0, (0.6, 0.0), 40.0)
     t.add(
-        ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", 3.0, 12.5),
-        "angry",
-        "wave-left-hand",
-    )
+        ES.Verdict("angry", "sad", "walk", "run", "walk", 2.0, -30.0, (0.0, 0.0), 50.0),
+        "angry", "walk", source,
+    )  # fmt: skip
+    t.add(
+        ES.Verdict("sad", "sad", "run", "run", "walk", 4.0, -40.0, (0.0, 0.0), 40.0),
+        "angry", "run", source,
+    )  # fmt: skip
+    t.add(
+        ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", 3.0, 12.5, (0.9, 0.7), 0.0),
+        "angry", "wave-left-hand", source,
+    )  # fmt: skip
     row = t.summary()
     assert row["style_accuracy"] == 0.3333 and row["style_accuracy_linear"] == 0.0
     assert row["content_accuracy"] == 0.6667 and row["content_accuracy_conv"] == 0.3333
     assert row["content_accuracy_all_takes"] == 0.6667
+    assert row["content_missed_all_takes"] == {"run -> walk": 1}
     assert row["hand_actions"] == 1 and row["hand_reach_cm"] == 12.5  # hand actions only
+    assert row["hand_use_error"] == 0.5  # (|0.9 - 0.6| + |0.7 - 0|) / 2, hand actions only
+    assert row["turning_error_deg"] == pytest.approx((10 + 0 + 40) / 3, abs=0.05)
     report = {
         "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
         "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
@@ -98,7 +108,22 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     table = ES.markdown(report)
     assert "hand actions" not in table  # a split no clip fell into is left out, not a crash
     assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
-    assert "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 3.0 | +12.5 (1) |" in table
+    assert (
+        "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 3.0 | +12.5 (1) | 50.0% "
+        "| 16.7 |" in table
+    )
+    assert "- translator: run -> walk: 1" in table
+
+
+def test_hands_up_and_turning_measure_what_a_clip_does():
+    raised = _left_arm_raised(np.pi / 2)
+    assert ES.hands_up(raised) == (1.0, 0.0) and ES.hands_up(_left_arm_raised(0.0)) == (0, 0)
+    assert ES.turning(raised) == pytest.approx(0.0, abs=1e-6)
+    turn = np.linspace(0.0, np.pi / 2, 30)  # the whole body turns 90 degrees to its left
+    lrot = raised.lrot.copy()
+    lrot[:, 0] = np.stack([0 * turn, np.sin(turn / 2), 0 * turn, np.cos(turn / 2)], axis=-1)
+    turned = Motion(C.SKELETON, 30.0, lrot, raised.lpos)
+    assert abs(ES.turning(turned)) == pytest.approx(90.0, abs=1.0)
 
 
 def test_folded_classifier_judges_a_take_with_networks_that_never_saw_it():
