@@ -588,26 +588,26 @@ def evaluate(
     test = held_list[:limit] if limit else held_list
     for i, x in enumerate(test):
         second = halves(x.motion)[1]
-        own = judge(x.take, second, content_all.fold_of(x.take))
-        rows["real held-out"].add(own, x.style, x.content, own)
+        source = judge(x.take, second, content_all.fold_of(x.take))
+        rows["real held-out"].add(source, x.style, x.content, source)
         for s in styles:
             real = real_of.get((x.content, s))
             # judged by the folded networks that never saw the real target's take
             fold = content_all.fold_of(real.take if real is not None else f"{x.take}>{s}")
-            rows["unchanged"].add(judge(x.take, second, fold), s, x.content, own)
+            rows["unchanged"].add(judge(x.take, second, fold), s, x.content, source)
             out = verdict(transfer(family, engine, second, s), fold)
-            rows[family].add(out, s, x.content, own)
-            per_style[s].add(out, s, x.content, own)
+            rows[family].add(out, s, x.content, source)
+            per_style[s].add(out, s, x.content, source)
             actions = "hand actions" if raises_a_hand(x.content) else "other actions"
             if real is None:
-                rows[f"{family} (no real target): {actions}"].add(out, s, x.content, own)
+                rows[f"{family} (no real target): {actions}"].add(out, s, x.content, source)
             else:
-                rows[f"{family} (pairs with a real target)"].add(out, s, x.content, own)
-                rows[f"{family} (pairs): {actions}"].add(out, s, x.content, own)
+                rows[f"{family} (pairs with a real target)"].add(out, s, x.content, source)
+                rows[f"{family} (pairs): {actions}"].add(out, s, x.content, source)
                 real_verdict = judge(real.take, halves(real.motion)[1], fold)
-                rows["real target"].add(real_verdict, s, x.content, own)
-                rows[f"real target: {actions}"].add(real_verdict, s, x.content, own)
-                per_style_real[s].add(real_verdict, s, x.content, own)
+                rows["real target"].add(real_verdict, s, x.content, source)
+                rows[f"real target: {actions}"].add(real_verdict, s, x.content, source)
+                per_style_real[s].add(real_verdict, s, x.content, source)
         log(
             f"[{family}] {i + 1}/{len(test)} {x.take}: "
             f"{rows[family].summary()} ({time.time() - started:.0f} s)"
