@@ -181,3 +181,37 @@ def torch_equal(a, b) -> bool:
         (p == q).all()
         for p, q in zip(a.state_dict().values(), b.state_dict().values(), strict=True)
     )
+
+
+def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypatch):
+    """The whole of :func:`evaluate` with the shipped model on one held-out take and
+    classifiers trained a few steps: a full run takes 13 minutes, and a crash in its last
+    lines had been found only at the end of one."""
+    import json
+    import shutil
+
+    from service.config import Settings
+    from tests.conftest import data_path
+
+    data_path("bandai")  # skips without the Bandai data
+    monkeypatch.setattr(ES.ConvClipClassifier.__init__, "__defaults__", ((0,), 5))  # quick
+    report = ES.evaluate("translator", limit=1, log=lambda *_: None)
+    styles = report["styles"]
+    assert report["held_out_takes"] == 1 and styles == 19
+    rows = report["rows"]
+    assert rows["real held-out"]["n"] == 1 and rows["unchanged"]["n"] == styles
+    assert rows["translator"]["n"] == styles  # the take sent to every style
+    pairs = rows["translator (pairs with a real target)"]["n"]
+    assert pairs == rows["real target"]["n"] and 0 < pairs < styles
+    assert rows["unchanged"]["turning_error_deg"] == 0.0  # the content against itself
+    assert rows["translator"]["foot_skating_cm_s"] >= 0.0
+    assert sum(r["n"] for r in report["per_style"].values()) == styles
+    assert "| translator |" in ES.markdown(report)
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    ES.record_in_manifest(report, models)
+    entry = next(
+        m for m in json.loads((models / "manifest.json").read_text())["models"]
+        if m["name"] == report["model_name"]
+    )  # fmt: skip
+    assert entry["metrics"]["evaluation"]["translator_held_out_takes"]["held_out_takes"] == 1
