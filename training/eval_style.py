@@ -138,19 +138,21 @@ def skating(motion: Motion) -> float:
 _HANDS, _HEAD = [C.INDEX["Hand_L"], C.INDEX["Hand_R"]], C.INDEX["Head"]
 
 
+def _above_head(motion: Motion) -> np.ndarray:
+    """Height of each hand (left, right) above the head per frame, ``(frames, 2)``."""
+    gpos = K.global_positions(motion)
+    return gpos[:, _HANDS, 1] - gpos[:, [_HEAD], 1]
+
+
 def hand_reach(motion: Motion) -> float:
     """How high the higher hand gets above the head, in cm (the larger of the two hands'
     95th percentile of height above the head): what a raised or waving hand keeps."""
-    gpos = K.global_positions(motion)
-    above = gpos[:, _HANDS, 1] - gpos[:, [_HEAD], 1]
-    return float(np.percentile(above, 95, axis=0).max())
+    return float(np.percentile(_above_head(motion), 95, axis=0).max())
 
 
 def hands_up(motion: Motion) -> tuple[float, float]:
     """The fraction of frames each hand (left, right) is above the head."""
-    gpos = K.global_positions(motion)
-    above = gpos[:, _HANDS, 1] > gpos[:, [_HEAD], 1]
-    return tuple(float(v) for v in above.mean(axis=0))
+    return tuple(float(v) for v in (_above_head(motion) > 0).mean(axis=0))
 
 
 def turning(motion: Motion) -> float:
