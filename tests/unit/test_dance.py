@@ -192,3 +192,43 @@ def test_evaluation_energy_blocks_are_whole_30_second_blocks():
     figures = ED.energy_blocks(speed, fps)
     assert figures == {"per_30s_min": 10.0, "per_30s_max": 40.0, "first_30s": 10.0,
                        "last_30s": 25.0}  # fmt: skip
+
+
+def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
+    """The whole of ``eval_dance.evaluate`` with the shipped model on one held-out song,
+    two seeds and one minute instead of ten: a full run takes many minutes, and its per-seed
+    figures (one row per seed, the extremes taken over all seeds) are checked nowhere else."""
+    import json
+    import shutil
+
+    from service.config import Settings
+    from tests.conftest import data_path
+    from training import eval_dance as ED
+
+    data_path("dance-with-melody")  # skips without the dance data
+    held, train = ED.held_out_songs()
+    monkeypatch.setattr(ED, "held_out_songs", lambda: (held[:1], train))
+    monkeypatch.setattr(ED, "TEN_MINUTES", 60.0)
+    report = ED.evaluate(seeds=2, log=lambda *_: None)
+    assert len(report["songs"]) == 1
+    (song,) = report["songs"].values()
+    assert len(song["generated"]) == len(song["generated_no_warp"]) == 2  # one per seed
+    ba = report["beat_alignment"]
+    assert ba["generated"]["n"] == ba["generated_no_warp"]["n"] == 2 and ba["real"]["n"] == 1
+    assert all(0.0 <= row["bas"] <= 1.0 for row in ba.values())
+    assert report["genre_accuracy"]["n_generated"] == 2
+    ten = report["ten_minutes"]
+    assert [r["seed"] for r in ten["per_seed"]] == [0, 1]
+    assert ten["frames"] >= 60 * 30 - 1  # a minute of motion for a minute of music
+    assert ten["per_30s_min"] == min(r["per_30s_min"] for r in ten["per_seed"])
+    assert ten["per_30s_max"] == max(r["per_30s_max"] for r in ten["per_seed"])
+    assert 0.0 < ten["per_30s_min"] <= ten["per_30s_max"]  # it moves, and min <= max
+    assert "2 seeds" in ED.markdown(report)
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    ED.record_in_manifest(report, models)
+    entry = next(
+        m for m in json.loads((models / "manifest.json").read_text())["models"]
+        if m["name"] == report["model_name"]
+    )  # fmt: skip
+    assert entry["metrics"]["evaluation"]["held_out_songs"]["seeds"] == 2
