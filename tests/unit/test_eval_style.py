@@ -95,6 +95,7 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     assert row["style_accuracy"] == 0.3333 and row["style_accuracy_linear"] == 0.0
     assert row["content_accuracy"] == 0.6667 and row["content_accuracy_conv"] == 0.3333
     assert row["content_accuracy_all_takes"] == 0.6667
+    assert row["content_accuracy_all_takes_merged"] == 0.6667  # run is not a walk
     assert row["content_missed_all_takes"] == {"run -> walk": 1}
     assert row["hand_actions"] == 1 and row["hand_reach_cm"] == 12.5  # hand actions only
     assert row["hand_use_error"] == 0.5  # (|0.9 - 0.6| + |0.7 - 0|) / 2, hand actions only
@@ -109,10 +110,47 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     assert "hand actions" not in table  # a split no clip fell into is left out, not a crash
     assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
     assert (
-        "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 3.0 | +12.5 (1) | 50.0% "
-        "| 16.7 |" in table
+        "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 66.7% | 3.0 | +12.5 (1) "
+        "| 50.0% | 16.7 |" in table
     )
     assert "- translator: run -> walk: 1" in table
+
+
+def test_merged_content_counts_a_turning_walk_read_as_a_walk_and_a_wave_by_either_name():
+    t = ES.Tally()
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 90.0)
+    said = ["walk", "run", "walk-turn-right", "walk-turn-left"]
+    for content_all in said:
+        verdict = ES.Verdict("sad", "sad", "walk", "walk", content_all, 2.0, 0.0, (0, 0), 90.0)
+        t.add(verdict, "sad", "walk-turn-left", source)
+    for content_all in ["bye", "byebye", "wave-left-hand"]:  # only bye is a right-hand wave
+        verdict = ES.Verdict("sad", "sad", "walk", "walk", content_all, 2.0, 0.0, (0, 0), 0.0)
+        t.add(verdict, "sad", "wave-right-hand", source)
+    row = t.summary()
+    assert row["content_accuracy_all_takes"] == round(1 / 7, 4)  # walk-turn-left itself
+    assert row["content_accuracy_all_takes_merged"] == round(4 / 7, 4)  # 3 walks and bye
+    assert ES.merged("walk-back") == "walk-back"  # a different action, not merged
+
+
+def test_merged_names_use_the_hands_alike():
+    """The premise of the merged content figure, on the real clips: dataset 1's bye and
+    byebye hold the same hands above the head, as long and as fast, as dataset 2's
+    wave-right-hand and wave-both-hands; the other hand actions do not match them."""
+    from tests.conftest import data_path
+    from training.data import load_bandai
+
+    data_path("bandai")  # skips without the Bandai data
+    up: dict[str, list] = {}
+    for clip in load_bandai():
+        up.setdefault(clip.content, []).append(ES.hands_up(clip.motion))
+    share = {content: np.mean(rows, axis=0) for content, rows in up.items()}
+    for a, b in [("bye", "wave-right-hand"), ("byebye", "wave-both-hands")]:
+        assert ES.merged(a) == ES.merged(b)
+        assert np.abs(share[a] - share[b]).max() < 0.1, (a, share[a], b, share[b])
+    assert share["bye"][0] < 0.05 < 0.4 < share["bye"][1]  # the right hand alone
+    assert min(share["byebye"]) > 0.4  # both hands
+    assert ES.merged("wave-left-hand") == "wave-left-hand"  # no dataset-1 twin
+    assert np.abs(share["bye"] - share["wave-left-hand"]).max() > 0.4
 
 
 def test_hands_up_and_turning_measure_what_a_clip_does():
