@@ -242,6 +242,9 @@ def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypa
     pairs = rows["translator (pairs with a real target)"]["n"]
     assert pairs == rows["real target"]["n"] and 0 < pairs < styles
     assert rows["unchanged"]["turning_error_deg"] == 0.0  # the content against itself
+    for row in rows.values():  # merging names can only add hits
+        if row["n"]:
+            assert row["content_accuracy_all_takes_merged"] >= row["content_accuracy_all_takes"]
     assert rows["translator"]["foot_skating_cm_s"] >= 0.0
     assert sum(r["n"] for r in report["per_style"].values()) == styles
     assert "| translator |" in ES.markdown(report)
