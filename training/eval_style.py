@@ -786,4 +786,8 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    # run as the imported module: classifiers pickled by ``python -m`` would otherwise name
+    # their classes ``__main__.*`` and load nowhere else (a script or a test importing this)
+    from training import eval_style
+
+    raise SystemExit(eval_style.main())
