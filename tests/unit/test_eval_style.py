@@ -38,7 +38,7 @@ def test_frame_features_mirror_swaps_sides():
     np.testing.assert_allclose(mirrored[:, -1], -plain[:, -1])  # turning left becomes right
 
 
-def test_conv_classifier_learns_what_tells_clips_apart():
+def test_conv_classifier_learns_what_tells_clips_apart(monkeypatch):
     rng = np.random.default_rng(0)
     features, labels = [], []
     for k, label in enumerate(("calm", "lively")):
@@ -48,7 +48,20 @@ def test_conv_classifier_learns_what_tells_clips_apart():
             x[:, 0] += np.sin(t * (0.1 if k == 0 else 1.2))
             features.append(x.astype(np.float32))
             labels.append(label)
-    clf = ES.ConvClipClassifier(features, labels, seeds=(0,), steps=150)
+    import torch
+
+    train, seen = ES.ConvClipClassifier._train_on_this_thread, []
+    monkeypatch.setattr(
+        ES.ConvClipClassifier, "_train_on_this_thread",
+        lambda self, *a: seen.append(torch.get_num_threads()) or train(self, *a),
+    )  # fmt: skip
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        clf = ES.ConvClipClassifier(features, labels, seeds=(0,), steps=150)
+        assert seen == [1] and torch.get_num_threads() == 2  # one thread, the caller's kept
+    finally:
+        torch.set_num_threads(threads)
     t = np.arange(70)
     for k, label in enumerate(("calm", "lively")):
         x = 0.3 * rng.normal(size=(len(t), 6))
