@@ -25,3 +25,19 @@ def data_dir() -> Path:
     if not DATA_DIR.exists():
         pytest.skip(f"shared data not available at {DATA_DIR} (set MOTION_DATA_DIR)")
     return DATA_DIR
+
+
+def recorded_evaluation(record, report: dict, tmp_path: Path) -> dict:
+    """``record(report, models)`` run on a copy of the shipped models folder in ``tmp_path``;
+    the ``metrics.evaluation`` it left in the report's model entry."""
+    import json
+    import shutil
+
+    from service.config import Settings
+
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    record(report, models)
+    entries = json.loads((models / "manifest.json").read_text())["models"]
+    entry = next(m for m in entries if m["name"] == report["model_name"])
+    return entry["metrics"]["evaluation"]

@@ -198,11 +198,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     """The whole of ``eval_dance.evaluate`` with the shipped model on one held-out song,
     two seeds and one minute instead of ten: a full run takes many minutes, and its per-seed
     figures (one row per seed, the extremes taken over all seeds) are checked nowhere else."""
-    import json
-    import shutil
-
-    from service.config import Settings
-    from tests.conftest import data_path
+    from tests.conftest import data_path, recorded_evaluation
     from training import eval_dance as ED
 
     data_path("dance-with-melody")  # skips without the dance data
@@ -224,11 +220,5 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     assert ten["per_30s_max"] == max(r["per_30s_max"] for r in ten["per_seed"])
     assert 0.0 < ten["per_30s_min"] <= ten["per_30s_max"]  # it moves, and min <= max
     assert "2 seeds" in ED.markdown(report)
-    models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
-    ED.record_in_manifest(report, models)
-    entry = next(
-        m for m in json.loads((models / "manifest.json").read_text())["models"]
-        if m["name"] == report["model_name"]
-    )  # fmt: skip
-    assert entry["metrics"]["evaluation"]["held_out_songs"]["seeds"] == 2
+    recorded = recorded_evaluation(ED.record_in_manifest, report, tmp_path)
+    assert recorded["held_out_songs"]["seeds"] == 2

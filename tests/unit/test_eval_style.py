@@ -238,11 +238,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypa
     """The whole of :func:`evaluate` with the shipped model on one held-out take and
     classifiers trained a few steps: a full run takes 13 minutes, and a crash in its last
     lines had been found only at the end of one."""
-    import json
-    import shutil
-
-    from service.config import Settings
-    from tests.conftest import data_path
+    from tests.conftest import data_path, recorded_evaluation
 
     data_path("bandai")  # skips without the Bandai data
     monkeypatch.setattr(ES.ConvClipClassifier.__init__, "__defaults__", ((0,), 5))  # quick
@@ -261,11 +257,5 @@ def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypa
     assert rows["translator"]["foot_skating_cm_s"] >= 0.0
     assert sum(r["n"] for r in report["per_style"].values()) == styles
     assert "| translator |" in ES.markdown(report)
-    models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
-    ES.record_in_manifest(report, models)
-    entry = next(
-        m for m in json.loads((models / "manifest.json").read_text())["models"]
-        if m["name"] == report["model_name"]
-    )  # fmt: skip
-    assert entry["metrics"]["evaluation"]["translator_held_out_takes"]["held_out_takes"] == 1
+    recorded = recorded_evaluation(ES.record_in_manifest, report, tmp_path)
+    assert recorded["translator_held_out_takes"]["held_out_takes"] == 1
