@@ -30,14 +30,13 @@ def data_dir() -> Path:
 def recorded_evaluation(record, report: dict, tmp_path: Path) -> dict:
     """``record(report, models)`` run on a copy of the shipped models folder in ``tmp_path``;
     the ``metrics.evaluation`` it left in the report's model entry."""
-    import json
     import shutil
 
     from service.config import Settings
+    from service.manifest import load_manifest
 
     models = tmp_path / "models"
     shutil.copytree(Settings().models_dir, models)
     record(report, models)
-    entries = json.loads((models / "manifest.json").read_text())["models"]
-    entry = next(m for m in entries if m["name"] == report["model_name"])
-    return entry["metrics"]["evaluation"]
+    entry = next(m for m in load_manifest(models).models if m.name == report["model_name"])
+    return entry.metrics["evaluation"]
