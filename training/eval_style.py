@@ -673,6 +673,11 @@ def evaluate(
     }
 
 
+def _shown(row: dict, key: str, spec: str) -> str:
+    """``row[key]`` formatted by ``spec``; "-" where absent (older reports, rows of no clips)."""
+    return "-" if row.get(key) is None else format(row[key], spec)
+
+
 def markdown(report: dict) -> str:
     lines = [
         f"**{report['family']}** ({report['model']}): {report['held_out_takes']} takes held out "
@@ -690,18 +695,13 @@ def markdown(report: dict) -> str:
     for name, row in report["rows"].items():
         if not row["n"]:
             continue
-        skate = "-" if row["foot_skating_cm_s"] is None else f"{row['foot_skating_cm_s']:.1f}"
-        conv = row.get("content_accuracy_conv")
-        conv = "-" if conv is None else f"{conv:.1%}"
-        every = row.get("content_accuracy_all_takes")
-        every = "-" if every is None else f"{every:.1%}"
-        same = row.get("content_accuracy_all_takes_merged")
-        same = "-" if same is None else f"{same:.1%}"
-        reach = row.get("hand_reach_cm")
-        reach = "-" if reach is None else f"{reach:+.1f} ({row['hand_actions']})"
-        use, turn = row.get("hand_use_error"), row.get("turning_error_deg")
-        use = "-" if use is None else f"{use:.1%}"
-        turn = "-" if turn is None else f"{turn:.1f}"
+        skate = _shown(row, "foot_skating_cm_s", ".1f")
+        conv = _shown(row, "content_accuracy_conv", ".1%")
+        every = _shown(row, "content_accuracy_all_takes", ".1%")
+        same = _shown(row, "content_accuracy_all_takes_merged", ".1%")
+        reach = _shown(row, "hand_reach_cm", "+.1f")
+        reach = reach if reach == "-" else f"{reach} ({row['hand_actions']})"
+        use, turn = _shown(row, "hand_use_error", ".1%"), _shown(row, "turning_error_deg", ".1f")
         lines.append(
             f"| {name} | {row['n']} | {row['style_accuracy']:.1%} | "
             f"{row['style_accuracy_linear']:.1%} | {row['content_accuracy']:.1%} | "

@@ -147,8 +147,8 @@ def test_merged_content_counts_a_turning_walk_read_as_a_walk_and_a_wave_by_eithe
 
 def test_merged_names_use_the_hands_alike():
     """The premise of the merged content figure, on the real clips: dataset 1's bye and
-    byebye hold the same hands above the head, as long and as fast, as dataset 2's
-    wave-right-hand and wave-both-hands; the other hand actions do not match them."""
+    byebye hold the same hands above the head, for as large a share of frames, as dataset
+    2's wave-right-hand and wave-both-hands; a wave of the left hand does not match bye."""
     from tests.conftest import data_path
     from training.data import load_bandai
 
