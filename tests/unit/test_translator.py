@@ -121,6 +121,13 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     T.main(args + ["--resume"])
     again = torch.load(ckpt, map_location="cpu", weights_only=False)
     assert again["step"] == 18 and again["model_config"]["keep_amplitude"]
+    # a grown decoder goes on from the same step with its optimizer
+    T.main(args + ["--resume", "--grow-decoder", "1"])
+    grown = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert grown["step"] == 21 and grown["model_config"]["decoder_resblocks"] == 3
+    assert "decoder.res.2.conv2.weight" in grown["generator"]
+    with pytest.raises(SystemExit):
+        T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
 
 
 def test_kept_amplitude_starts_as_instance_norm_and_can_hand_on_a_spans_amplitude():
@@ -144,6 +151,58 @@ def test_kept_amplitude_starts_as_instance_norm_and_can_hand_on_a_spans_amplitud
     refs = [m.log_ref for m in g.modules() if isinstance(m, M.Norm)]
     assert len(refs) == 9 and all(float(r.detach().abs().max()) > 0 for r in refs)
     assert not any(m.calibrating for m in g.modules() if isinstance(m, M.Norm))
+
+
+def test_grown_decoder_translates_as_before_then_learns_with_the_old_moments():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, keep_amplitude=True, content_channels=[16, 24])
+    cfg.style_channels, cfg.style_dim, cfg.mlp_hidden = [16, 16, 16], 8, 12
+    g = M.Translator(cfg)
+    content = torch.randn(2, Fe.CONTENT_CHANNELS, 32)
+    style = torch.randn(2, Fe.STYLE3D_CHANNELS, 32)
+    M.calibrate_amplitude(g, content, style)
+    names = T._optimizer_names(g, 2)
+    params = dict(g.named_parameters())
+    opt = torch.optim.Adam([params[n] for n in names[0]], lr=1e-3)
+    opt.add_param_group({"params": [params[n] for n in names[1]], "lr_scale": 30.0})
+    for _ in range(2):  # Adam moments for every old parameter
+        opt.zero_grad()
+        g(content, style).square().mean().backward()
+        opt.step()
+    ckpt = {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+
+    grown = T.grow_decoder(ckpt, 2)
+    assert grown["model_config"]["decoder_resblocks"] == cfg.decoder_resblocks + 2
+    h = M.Translator(M.ModelConfig(**grown["model_config"]))
+    h.load_state_dict(grown["generator"])
+    with torch.no_grad():
+        assert torch.equal(h(content, style), g(content, style))
+    new_names = T._optimizer_names(h, 2)
+    new_params = dict(h.named_parameters())
+    opt_h = torch.optim.Adam([new_params[n] for n in new_names[0]], lr=1e-3)
+    opt_h.add_param_group({"params": [new_params[n] for n in new_names[1]], "lr_scale": 30.0})
+    opt_h.load_state_dict(grown["opt_g"])
+    old_state = {n: opt.state[params[n]] for n in names[0] + names[1] if params[n] in opt.state}
+    assert len(old_state) > 20  # the 2D style encoder, unused here, has none
+    for name in old_state:
+        moved = opt_h.state[new_params[name]]["exp_avg"]
+        if name.startswith("decoder.mlp.4"):  # the new blocks' rows sit between the old ones
+            rows = 4 * cfg.content_channels[-1] * cfg.decoder_resblocks
+            assert torch.equal(moved[:rows], old_state[name]["exp_avg"][:rows])
+            assert torch.equal(moved[-2 * 16 :], old_state[name]["exp_avg"][-2 * 16 :])
+            assert not moved[rows : rows + 2 * 4 * 24].any()
+        else:
+            assert torch.equal(moved, old_state[name]["exp_avg"])
+    assert all(new_params[n] not in opt_h.state for n in new_names[0] if ".res.2." in n)
+    # the new blocks learn: after a step their second AdaIN scale is no longer zero
+    opt_h.zero_grad()
+    h(content, style).square().mean().backward()
+    opt_h.step()
+    with torch.no_grad():
+        p = h.decoder.mlp(h.style3d(style)).split(h.decoder.param_sizes, dim=1)[2]
+        assert float((1.0 + p.split(24, dim=1)[2]).abs().max()) > 0
 
 
 def random_batch(batch: int, frames: int, styles: list[int]):

@@ -617,6 +617,84 @@ def load_translator(path: str | Path) -> tuple[Translator, Fe.FeatureStats, dict
     return g, stats_from_dict(ckpt["stats"]), meta
 
 
+def _optimizer_names(g: Translator, groups: int) -> list[list[str]]:
+    """The generator's parameter names in the order each of ``opt_g``'s groups holds them."""
+    names = [name for name, _ in g.named_parameters()]
+    plain = [n for n in names if not n.endswith(AMPLITUDE_PARAMETERS)]
+    kept = [n for n in names if n.endswith(AMPLITUDE_PARAMETERS)]
+    return [plain, kept][:groups]
+
+
+def grow_decoder(ckpt: dict, extra: int) -> dict:
+    """``ckpt`` with ``extra`` more AdaIN residual blocks in the decoder, each starting as
+    the identity, so the grown generator translates exactly as before and training goes
+    on from there (more room for style without training from scratch).
+
+    A new block's second AdaIN scale starts at 0 (its MLP rows give ``1 + s2 = 0``,
+    ``b2 = 0``): the block adds nothing, yet the gradient reaches those rows at once and
+    through them the block's convolutions. Its kept-amplitude references are the last old
+    block's (same level). Adam's moments follow each old parameter to its new place; the
+    MLP's new rows and the new blocks start with none."""
+    if extra <= 0:
+        return ckpt
+    old_cfg = ModelConfig(**ckpt["model_config"])
+    new_cfg = dataclasses.replace(old_cfg, decoder_resblocks=old_cfg.decoder_resblocks + extra)
+    old_g, new_g = Translator(old_cfg), Translator(new_cfg)
+    old_g.load_state_dict(ckpt["generator"])
+    channels = old_cfg.content_channels[-1]
+    at = 4 * channels * old_cfg.decoder_resblocks  # the new blocks' rows follow the old blocks'
+    rows = 4 * channels * extra
+    last = f"decoder.mlp.{len(new_g.decoder.mlp) - 1}"
+
+    def widened(t: torch.Tensor, fill: torch.Tensor) -> torch.Tensor:
+        return torch.cat([t[:at], fill.to(t.dtype), t[at:]])
+
+    state = new_g.state_dict()
+    for name, value in ckpt["generator"].items():
+        if name not in (f"{last}.weight", f"{last}.bias"):
+            state[name] = value
+    state[f"{last}.weight"] = widened(
+        ckpt["generator"][f"{last}.weight"], torch.zeros(rows, old_cfg.mlp_hidden)
+    )
+    bias = torch.zeros(extra, 4, channels)
+    bias[:, 2] = -1.0  # s2: the second AdaIN's scale 1 + s2 starts at 0
+    state[f"{last}.bias"] = widened(ckpt["generator"][f"{last}.bias"], bias.reshape(-1))
+    if old_cfg.keep_amplitude:
+        source = f"decoder.res.{old_cfg.decoder_resblocks - 1}"
+        for k in range(old_cfg.decoder_resblocks, new_cfg.decoder_resblocks):
+            for norm in ("norm1", "norm2"):
+                state[f"decoder.res.{k}.{norm}.log_ref"] = ckpt["generator"][
+                    f"{source}.{norm}.log_ref"
+                ].clone()
+    new_g.load_state_dict(state)
+
+    opt = ckpt["opt_g"]
+    old_names = _optimizer_names(old_g, len(opt["param_groups"]))
+    new_names = _optimizer_names(new_g, len(opt["param_groups"]))
+    moments = {}
+    for group, names in zip(opt["param_groups"], old_names, strict=True):
+        for index, name in zip(group["params"], names, strict=True):
+            if index in opt["state"]:
+                moments[name] = opt["state"][index]
+    new_state, groups, index = {}, [], 0
+    for group, names in zip(opt["param_groups"], new_names, strict=True):
+        groups.append(group | {"params": list(range(index, index + len(names)))})
+        for name in names:
+            if name in moments:
+                m = dict(moments[name])
+                if name.startswith(last):
+                    fill = torch.zeros((rows, *m["exp_avg"].shape[1:]))
+                    m["exp_avg"] = widened(m["exp_avg"], fill)
+                    m["exp_avg_sq"] = widened(m["exp_avg_sq"], fill)
+                new_state[index] = m
+            index += 1
+    return ckpt | {
+        "model_config": new_cfg.to_dict(),
+        "generator": new_g.state_dict(),
+        "opt_g": {"state": new_state, "param_groups": groups},
+    }
+
+
 # --------------------------------------------------------------------------- loop
 
 
@@ -634,14 +712,17 @@ def train(
     max_steps: int | None,
     model_cfg: ModelConfig | None = None,
     keep_amplitude: bool = False,
+    grow: int = 0,
 ) -> dict:
     """Train (or go on training) until ``cfg.steps``, or ``max_steps`` more steps.
-    ``keep_amplitude`` turns :class:`Norm`'s kept amplitude on, for a resumed model too."""
+    ``keep_amplitude`` turns :class:`Norm`'s kept amplitude on, for a resumed model too;
+    ``grow`` adds that many decoder blocks to a resumed model (:func:`grow_decoder`)."""
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False) if resume else None
     if ckpt is not None:
+        ckpt = grow_decoder(ckpt, grow)
         model_cfg = ModelConfig(**ckpt["model_config"])
     prep = prepare(cfg, ckpt["val_takes"] if ckpt else None)
     if ckpt is not None:
@@ -869,7 +950,16 @@ def main(argv: list[str] | None = None) -> None:
         help="let every instance norm learn to keep some of its input's amplitude "
         "(a resumed model starts where it was)",
     )
+    parser.add_argument(
+        "--grow-decoder",
+        type=int,
+        default=0,
+        help="with --resume: add this many AdaIN residual blocks to the decoder, each "
+        "starting as the identity",
+    )
     args = parser.parse_args(argv)
+    if args.grow_decoder and not args.resume:
+        parser.error("--grow-decoder needs --resume (a fresh model takes its size from the config)")
 
     given = {
         f.name: getattr(args, f.name)
@@ -903,5 +993,12 @@ def main(argv: list[str] | None = None) -> None:
             mlp_hidden=scale([base_model.mlp_hidden])[0],
         )
     train(
-        cfg, args.checkpoint, args.log_dir, args.resume, max_steps, model_cfg, args.keep_amplitude
+        cfg,
+        args.checkpoint,
+        args.log_dir,
+        args.resume,
+        max_steps,
+        model_cfg,
+        args.keep_amplitude,
+        args.grow_decoder,
     )
