@@ -128,6 +128,12 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     assert "decoder.res.2.conv2.weight" in grown["generator"]
     with pytest.raises(SystemExit):
         T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
+    # a run whose validation reconstruction drifts past diverged_factor x its best stops
+    # and leaves the last checkpoint as it was (a factor under 1 trips at the first check)
+    before = ckpt.read_bytes()
+    with pytest.raises(SystemExit, match="diverged at step 24: validation rec_pos_cm"):
+        T.main(args + ["--resume", "--diverged-factor", "0.5"])
+    assert ckpt.read_bytes() == before
 
 
 def test_kept_amplitude_starts_as_instance_norm_and_can_hand_on_a_spans_amplitude():

@@ -48,7 +48,10 @@ rotations 0.67 vs 0.52 after 200 steps).
 Checkpoints (one file, overwritten, resumable) hold both networks, optimizers, step,
 configs, statistics and the validation takes; the statistics (``*_stats.npz``) and the
 run's config (``*_config.json``) are also written beside it. ``MOTION_SMOKE=1`` or
-``--max-steps`` stops early (smoke tests).
+``--max-steps`` stops early (smoke tests). A validation reconstruction error over
+``diverged_factor`` times the run's best stops the run before it overwrites the checkpoint:
+fine-tuning runs of 6,000 steps and more have collapsed (the generator drove the content
+heads' scores without bound and reconstruction went from 3 to 15-20 cm).
 """
 
 from __future__ import annotations
@@ -136,6 +139,10 @@ class TrainConfig:
     val_every: int = 500
     val_windows: int = 512
     checkpoint_minutes: float = 10.0
+    # validation rec_pos_cm over this many times the run's best (after adv_warmup; a resumed
+    # run starts from its checkpoint's): the generator has found a way past a discriminator
+    # head and is drifting off the data, so stop and keep the last checkpoint
+    diverged_factor: float = 1.5
     clips_per_style: int = 0  # > 0: a tiny subset, for smoke tests
     datasets: tuple[int, ...] = (1, 2)
 
@@ -843,6 +850,8 @@ def train(
         flush=True,
     )
     metrics: dict = {}
+    best_rec = float((ckpt or {}).get("metrics", {}).get("rec_pos_cm", math.inf))
+    saved_step = step if ckpt is not None else None
     last_save = time.monotonic()
     started, start_step = time.monotonic(), step
     bar = tqdm(total=cfg.steps, initial=step, mininterval=30, file=sys.stderr, dynamic_ncols=False)
@@ -904,8 +913,20 @@ def train(
                 writer.add_scalar(f"val/{k}", v, step)
             shown = " ".join(f"{k}={v:.3f}" for k, v in metrics.items())
             print(f"step {step}: rec_pos_cm={logs['rec_pos_cm']:.2f} val {shown}", flush=True)
+            if metrics["rec_pos_cm"] > cfg.diverged_factor * best_rec:
+                bar.close()
+                writer.close()
+                kept = f"keeps step {saved_step}" if saved_step is not None else "was not written"
+                raise SystemExit(
+                    f"translator training diverged at step {step}: validation rec_pos_cm "
+                    f"{metrics['rec_pos_cm']:.2f} is over {cfg.diverged_factor} x the run's best "
+                    f"{best_rec:.2f}; the checkpoint {checkpoint} {kept}"
+                )
+            if step >= cfg.adv_warmup:
+                best_rec = min(best_rec, metrics["rec_pos_cm"])
         if time.monotonic() - last_save > 60 * cfg.checkpoint_minutes or step == end:
             save(metrics)
+            saved_step = step
             last_save = time.monotonic()
     bar.close()
     writer.close()
