@@ -249,11 +249,11 @@ def test_content_cycle_translates_to_its_own_style_batch():
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_cycle=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        _, logs_off, _ = off.generator(m, n, x)
+        _, logs_off, *_ = off.generator(m, n, x)
         torch.manual_seed(1)
-        _, logs_x, _ = on.generator(m, n, x)
+        _, logs_x, *_ = on.generator(m, n, x)
         torch.manual_seed(1)
-        _, logs_r, _ = on.generator(m, n, x, r=r)
+        _, logs_r, *_ = on.generator(m, n, x, r=r)
     assert logs_off["content_cycle"] == 0.0 and logs_x["content_cycle"] > 0.0
     # r's style feeds the cycle only: the adversarial term still judges the translation to x
     assert logs_r["content_cycle"] != pytest.approx(logs_x["content_cycle"])
@@ -349,9 +349,9 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_raised_hands=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        total_off, logs_off, _ = off.generator(m, n, x, r=r)
+        total_off, logs_off, *_ = off.generator(m, n, x, r=r)
         torch.manual_seed(1)
-        total_on, logs_on, _ = on.generator(m, n, x, r=r)
+        total_on, logs_on, *_ = on.generator(m, n, x, r=r)
     assert logs_off["raised_hands_cm"] == 0.0 and logs_on["raised_hands_cm"] > 0.0
     expected = logs_on["raised_hands_cm"] / Fe.LEG
     assert float(total_on - total_off) == pytest.approx(expected, rel=1e-4, abs=1e-6)
@@ -359,7 +359,7 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     amp = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_hand_amplitude=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        total_amp, logs_amp, fake = amp.generator(m, n, x, r=r)
+        total_amp, logs_amp, fake, _ = amp.generator(m, n, x, r=r)
         fake_pos = amp.positions(fake, m.hips_height)
     assert logs_off["hand_amplitude"] == 0.0 and logs_amp["hand_amplitude"] > 0.0
     assert logs_amp["hand_amplitude"] == pytest.approx(
@@ -383,7 +383,7 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_content_adv=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        total, logs, fake = on.generator(m, n, x)
+        total, logs, fake, wild = on.generator(m, n, x)
         fake_scores = d(on.disc_input(fake, on.positions(fake, m.hips_height)))[0]
     expected = -0.5 * float(fake_scores[0, 3 + 2].mean() + fake_scores[2, 3 + 0].mean())
     assert logs["content_adv_g"] == pytest.approx(expected, rel=1e-4)
@@ -396,3 +396,19 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
     loss.backward()
     assert logs_d["d_real_content"] > 0.0 and logs_d["d_fake_content"] > 0.0
     assert float(d.content_head.weight.grad.abs().sum()) > 0.0
+    assert wild is None  # no term translates to another style r here
+    # translations to r, scored by the content heads in the generator's loss, are fakes to
+    # the heads too
+    r = random_batch(3, 32, [2, 0, 1])
+    both = T.Losses(g, d, T.Standardizer(stats),
+                    T.TrainConfig(w_content_adv=1.0, w_raised_hands=1.0, pair_content=True))  # fmt: skip
+    with torch.no_grad():
+        torch.manual_seed(2)
+        _, _, fake, wild = both.generator(m, n, x, r=r)
+        wild_scores = d(both.disc_input(wild, both.positions(wild, m.hips_height)))[0]
+        fake_scores = d(both.disc_input(fake, both.positions(fake, m.hips_height)))[0]
+        _, logs_both = both.discriminator(m, x, fake, False, wild)
+    hinge = lambda sc: torch.cat([sc[0, 3 + 2], sc[2, 3 + 0]]).add(1).relu().mean()  # noqa: E731
+    expected = 0.5 * float(hinge(fake_scores) + hinge(wild_scores))
+    assert not torch.equal(wild, fake)
+    assert logs_both["d_fake_content"] == pytest.approx(expected, rel=1e-4)

@@ -378,10 +378,11 @@ class Losses:
 
     def generator(
         self, m: Batch, n: Batch, x: Batch, ramp: float = 1.0, r: Batch | None = None
-    ) -> tuple[torch.Tensor, dict, torch.Tensor]:
-        """Generator loss, its parts, and the detached translations; ``ramp`` in [0, 1]
-        scales the adversarial terms (they slow reconstruction down early on); the content
-        cycle translates m to ``r``'s style (default x)."""
+    ) -> tuple[torch.Tensor, dict, torch.Tensor, torch.Tensor | None]:
+        """Generator loss, its parts, and the detached translations to x and to ``r`` (None
+        where no term translates to r); ``ramp`` in [0, 1] scales the adversarial terms
+        (they slow reconstruction down early on); the content cycle translates m to
+        ``r``'s style (default x)."""
         cfg = self.cfg
         use2d = torch.rand(len(m.style)) < cfg.p_style2d
         z_content = self.g.content_encoder(m.content)
@@ -478,9 +479,16 @@ class Losses:
             "content_adv_g": content_adv,
             "total_g": total,
         }  # fmt: skip
-        return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach()
+        wild = None if wild is None or wild is fake else wild.detach()
+        return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach(), wild
 
-    def discriminator(self, m: Batch, x: Batch, fake: torch.Tensor, r1: bool) -> tuple:
+    def discriminator(
+        self, m: Batch, x: Batch, fake: torch.Tensor, r1: bool, wild: torch.Tensor | None = None
+    ) -> tuple:
+        """Discriminator loss and its parts. The content heads learn to reject the
+        translations to r (``wild``) as well as those to x: the generator is scored on both,
+        and a head that never saw translations to r had nothing to hold their scores back
+        (fine-tuning runs drove them into the hundreds and collapsed)."""
         real_x = x.disc_input.requires_grad_(r1)
         all_x, all_m = self.d(real_x)[0], self.d(m.disc_input)[0]
         scores_x, scores_m = self.pick(all_x, x.style), self.pick(all_m, m.style)
@@ -499,6 +507,11 @@ class Losses:
                 + self.hinge_mean(F.relu(1 - self.pick_content(all_m, m.label)))
             )
             fake_c = self.hinge_mean(F.relu(1 + self.pick_content(all_f, m.label)))
+            if wild is not None:
+                with torch.no_grad():
+                    wild_in = self.disc_input(wild, self.positions(wild, m.hips_height))
+                wild_scores = self.pick_content(self.d(wild_in)[0], m.label)
+                fake_c = 0.5 * (fake_c + self.hinge_mean(F.relu(1 + wild_scores)))
             total = total + real_c + fake_c
             logs |= {
                 "d_real_content": float(real_c.detach()),
@@ -889,12 +902,12 @@ def train(
             r = to_batch(TD.cut(sampler.pick(styles_r), cfg.window), norm)
 
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
-        loss_g, logs, fake = losses.generator(m, n, x, ramp, r)
+        loss_g, logs, fake, wild = losses.generator(m, n, x, ramp, r)
         opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         opt_g.step()
 
-        loss_d, logs_d = losses.discriminator(m, x, fake, r1=step % cfg.r1_every == 0)
+        loss_d, logs_d = losses.discriminator(m, x, fake, step % cfg.r1_every == 0, wild)
         opt_d.zero_grad(set_to_none=True)
         loss_d.backward()
         opt_d.step()
