@@ -33,9 +33,10 @@ One step, for a batch of B content windows ``m`` (style s):
   in the paper): a wave keeps the hand moving where a raise holds it.
 - with ``w_content_adv``: the discriminator also has a head per content label (``walk``,
   ``raise-up-left-hand``...), trained like the style heads on real windows of that label
-  (any style) against translations of content windows with that label; the translations
-  to x (and r) must pass the head of m's label (not in the paper). The style heads judge
-  style but not what is performed, and translations of raises passed as waves.
+  (any style) against translations of content windows with that label (to x, and to r);
+  the translations to x (and r) must pass the head of m's label (not in the paper). The
+  style heads judge style but not what is performed, and translations of raises passed as
+  waves.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
