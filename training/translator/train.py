@@ -282,7 +282,7 @@ def hands_lifted(content: torch.Tensor, translation: torch.Tensor) -> torch.Tens
     :func:`hands_dropped`. Translations of wave-left-hand to the styles that never wave
     (0.1.53000) held the idle right hand above the head in 94% of frames, the content in
     none, and the content classifier read them as waves of both hands. Measured, 3,000 steps
-    with weight 2 from 0.1.53000 (0.1.56000, shipped): the fraction of frames each hand of
+    with weight 2 from 0.1.53000 (0.1.56000): the fraction of frames each hand of
     a transferred raise or wave is above the head is 0.169 off the content's (0.211 before;
     real performances in the target style: 0.237), style 28.6 -> 28.9%, content of all
     transfers 53.0 -> 52.8% (all-takes classifier)."""
