@@ -51,8 +51,9 @@ configs, statistics and the validation takes; the statistics (``*_stats.npz``) a
 run's config (``*_config.json``) are also written beside it. ``MOTION_SMOKE=1`` or
 ``--max-steps`` stops early (smoke tests). A validation reconstruction error over
 ``diverged_factor`` times the run's best stops the run before it overwrites the checkpoint:
-fine-tuning runs of 6,000 steps and more have collapsed (the generator drove the content
-heads' scores without bound and reconstruction went from 3 to 15-20 cm).
+two fine-tuning runs of a grown decoder collapsed after 3,000 and 6,000 steps (the
+generator drove the content heads' scores without bound, before those heads learned from
+translations to r, and reconstruction went from 3 to 15-22 cm).
 """
 
 from __future__ import annotations
