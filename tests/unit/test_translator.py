@@ -359,7 +359,8 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     amp = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_hand_amplitude=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        total_amp, logs_amp, fake, _ = amp.generator(m, n, x, r=r)
+        total_amp, logs_amp, fake_in, _ = amp.generator(m, n, x, r=r)
+        fake = fake_in[:, Fe.STYLE3D_CHANNELS :]  # the discriminator's input: positions, output
         fake_pos = amp.positions(fake, m.hips_height)
     assert logs_off["hand_amplitude"] == 0.0 and logs_amp["hand_amplitude"] > 0.0
     assert logs_amp["hand_amplitude"] == pytest.approx(
@@ -383,8 +384,10 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_content_adv=1.0))
     with torch.no_grad():
         torch.manual_seed(1)
-        total, logs, fake, wild = on.generator(m, n, x)
-        fake_scores = d(on.disc_input(fake, on.positions(fake, m.hips_height)))[0]
+        total, logs, fake_in, wild_in = on.generator(m, n, x)
+        fake = fake_in[:, Fe.STYLE3D_CHANNELS :]  # the discriminator's input: positions, output
+        assert torch.equal(on.disc_input(fake, on.positions(fake, m.hips_height)), fake_in)
+        fake_scores = d(fake_in)[0]
     expected = -0.5 * float(fake_scores[0, 3 + 2].mean() + fake_scores[2, 3 + 0].mean())
     assert logs["content_adv_g"] == pytest.approx(expected, rel=1e-4)
     off = T.Losses(g, M.Discriminator(M.ModelConfig(num_styles=3)), T.Standardizer(stats),
@@ -392,11 +395,11 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
     with torch.no_grad():
         assert off.generator(m, n, x)[1]["content_adv_g"] == 0.0
     # the discriminator learns its content heads from real windows and translations
-    loss, logs_d = on.discriminator(m, x, fake, r1=True)
+    loss, logs_d = on.discriminator(m, x, fake_in, r1=True)
     loss.backward()
     assert logs_d["d_real_content"] > 0.0 and logs_d["d_fake_content"] > 0.0
     assert float(d.content_head.weight.grad.abs().sum()) > 0.0
-    assert wild is None  # no term translates to another style r here
+    assert wild_in is None  # no term translates to another style r here
     # translations to r, scored by the content heads in the generator's loss, are fakes to
     # the heads too
     r = random_batch(3, 32, [2, 0, 1])
@@ -404,11 +407,12 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
                     T.TrainConfig(w_content_adv=1.0, w_raised_hands=1.0, pair_content=True))  # fmt: skip
     with torch.no_grad():
         torch.manual_seed(2)
-        _, _, fake, wild = both.generator(m, n, x, r=r)
-        wild_scores = d(both.disc_input(wild, both.positions(wild, m.hips_height)))[0]
-        fake_scores = d(both.disc_input(fake, both.positions(fake, m.hips_height)))[0]
-        _, logs_both = both.discriminator(m, x, fake, False, wild)
+        _, _, fake_in, wild_in = both.generator(m, n, x, r=r)
+        wild = wild_in[:, Fe.STYLE3D_CHANNELS :]
+        assert torch.equal(both.disc_input(wild, both.positions(wild, m.hips_height)), wild_in)
+        wild_scores, fake_scores = d(wild_in)[0], d(fake_in)[0]
+        _, logs_both = both.discriminator(m, x, fake_in, False, wild_in)
     hinge = lambda sc: torch.cat([sc[0, 3 + 2], sc[2, 3 + 0]]).add(1).relu().mean()  # noqa: E731
     expected = 0.5 * float(hinge(fake_scores) + hinge(wild_scores))
-    assert not torch.equal(wild, fake)
+    assert not torch.equal(wild_in, fake_in)
     assert logs_both["d_fake_content"] == pytest.approx(expected, rel=1e-4)

@@ -381,10 +381,11 @@ class Losses:
     def generator(
         self, m: Batch, n: Batch, x: Batch, ramp: float = 1.0, r: Batch | None = None
     ) -> tuple[torch.Tensor, dict, torch.Tensor, torch.Tensor | None]:
-        """Generator loss, its parts, and the detached translations to x and to ``r`` (None
-        where no term translates to r); ``ramp`` in [0, 1] scales the adversarial terms
-        (they slow reconstruction down early on); the content cycle translates m to
-        ``r``'s style (default x)."""
+        """Generator loss, its parts, and the discriminator inputs (detached) of the
+        translations to x and to ``r`` (None where no term translates to r), so that the
+        discriminator does not run forward kinematics on them again; ``ramp`` in [0, 1]
+        scales the adversarial terms (they slow reconstruction down early on); the content
+        cycle translates m to ``r``'s style (default x)."""
         cfg = self.cfg
         use2d = torch.rand(len(m.style)) < cfg.p_style2d
         z_content = self.g.content_encoder(m.content)
@@ -410,7 +411,7 @@ class Losses:
 
         cycle, raised, lifted, amplitude, speed = (torch.zeros(()) for _ in range(5))
         content_adv = torch.zeros(())
-        wild = wild_pos = None
+        wild = wild_pos = wild_in = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
             # to r, a style that may not perform m's content: no other term judges those
             # translations
@@ -418,14 +419,9 @@ class Losses:
             wild = fake if r is x else self.g.decoder(z_content, self.g.style3d(r.style3d))
             if wild is fake:
                 wild_pos = fake_pos
-            elif (
-                cfg.w_raised_hands > 0
-                or cfg.w_lifted_hands > 0
-                or cfg.w_hand_amplitude > 0
-                or cfg.w_hand_speed > 0
-                or cfg.w_content_adv > 0
-            ):
+            else:  # the discriminator's content heads learn from it as a fake
                 wild_pos = self.positions(wild, m.hips_height)
+                wild_in = self.disc_input(wild, wild_pos)
         if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
             again = self.g.content_encoder(torch.cat([wild, root], dim=1))
@@ -436,7 +432,7 @@ class Losses:
         def on_translations(term, *args) -> torch.Tensor:
             """``term`` of the translation to x, averaged with the one to r if there is one."""
             value = term(m.positions, fake_pos, *args)
-            if wild is not None and wild is not fake:
+            if wild_in is not None:
                 value = 0.5 * (value + term(m.positions, wild_pos, *args))
             return value
 
@@ -449,8 +445,8 @@ class Losses:
             speed = on_translations(hand_speed_changed, cfg.hand_speed_ratio)
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
-            if wild is not None and wild is not fake:
-                wild_scores = self.d(self.disc_input(wild, wild_pos))[0]
+            if wild_in is not None:
+                wild_scores = self.d(wild_in)[0]
                 wild_adv = -self.hinge_mean(self.pick_content(wild_scores, m.label))
                 content_adv = 0.5 * (content_adv + wild_adv)
 
@@ -481,21 +477,25 @@ class Losses:
             "content_adv_g": content_adv,
             "total_g": total,
         }  # fmt: skip
-        wild = None if wild is None or wild is fake else wild.detach()
-        return total, {k: float(v.detach()) for k, v in logs.items()}, fake.detach(), wild
+        wild_in = None if wild_in is None else wild_in.detach()
+        return total, {k: float(v.detach()) for k, v in logs.items()}, fake_in.detach(), wild_in
 
     def discriminator(
-        self, m: Batch, x: Batch, fake: torch.Tensor, r1: bool, wild: torch.Tensor | None = None
+        self,
+        m: Batch,
+        x: Batch,
+        fake_in: torch.Tensor,
+        r1: bool,
+        wild_in: torch.Tensor | None = None,
     ) -> tuple:
-        """Discriminator loss and its parts. The content heads learn to reject the
-        translations to r (``wild``) as well as those to x: the generator is scored on both,
-        and a head that never saw translations to r had nothing to hold their scores back
-        (fine-tuning runs drove them into the hundreds and collapsed)."""
+        """Discriminator loss and its parts, from the discriminator inputs of the translations
+        to x (``fake_in``) and to r (``wild_in``) that :meth:`generator` returns. The content
+        heads learn to reject the translations to r as well as those to x: the generator is
+        scored on both, and a head that never saw translations to r had nothing to hold their
+        scores back (fine-tuning runs drove them into the hundreds and collapsed)."""
         real_x = x.disc_input.requires_grad_(r1)
         all_x, all_m = self.d(real_x)[0], self.d(m.disc_input)[0]
         scores_x, scores_m = self.pick(all_x, x.style), self.pick(all_m, m.style)
-        with torch.no_grad():
-            fake_in = self.disc_input(fake, self.positions(fake, m.hips_height))
         all_f = self.d(fake_in)[0]
         scores_f = self.pick(all_f, x.style)
         real = 0.5 * (F.relu(1 - scores_x).mean() + F.relu(1 - scores_m).mean())
@@ -509,9 +509,7 @@ class Losses:
                 + self.hinge_mean(F.relu(1 - self.pick_content(all_m, m.label)))
             )
             fake_c = self.hinge_mean(F.relu(1 + self.pick_content(all_f, m.label)))
-            if wild is not None:
-                with torch.no_grad():
-                    wild_in = self.disc_input(wild, self.positions(wild, m.hips_height))
+            if wild_in is not None:
                 wild_scores = self.pick_content(self.d(wild_in)[0], m.label)
                 fake_c = 0.5 * (fake_c + self.hinge_mean(F.relu(1 + wild_scores)))
             total = total + real_c + fake_c
@@ -904,12 +902,12 @@ def train(
             r = to_batch(TD.cut(sampler.pick(styles_r), cfg.window), norm)
 
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
-        loss_g, logs, fake, wild = losses.generator(m, n, x, ramp, r)
+        loss_g, logs, fake_in, wild_in = losses.generator(m, n, x, ramp, r)
         opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         opt_g.step()
 
-        loss_d, logs_d = losses.discriminator(m, x, fake, step % cfg.r1_every == 0, wild)
+        loss_d, logs_d = losses.discriminator(m, x, fake_in, step % cfg.r1_every == 0, wild_in)
         opt_d.zero_grad(set_to_none=True)
         loss_d.backward()
         opt_d.step()
