@@ -416,3 +416,38 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
     expected = 0.5 * float(hinge(fake_scores) + hinge(wild_scores))
     assert not torch.equal(wild_in, fake_in)
     assert logs_both["d_fake_content"] == pytest.approx(expected, rel=1e-4)
+
+
+def test_style_heads_classify_reals_and_translations_only_when_weighted():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, num_contents=2)
+    stats = identity_stats()
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    m, n, x = (random_batch(3, 32, s) for s in ([0, 1, 2], [0, 1, 2], [1, 2, 0]))
+    off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig())
+    on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_style_cls=0.5))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total_off, logs_off, *_ = off.generator(m, n, x)
+        torch.manual_seed(1)
+        total_on, logs_on, fake_in, _ = on.generator(m, n, x)
+        # the logits are the style heads' scores only (not the content heads'), over time
+        logits = d(fake_in)[0][:, :3].mean(dim=-1)
+    expected = float(torch.nn.functional.cross_entropy(logits, x.style))
+    assert logs_off["style_cls_g"] == 0.0
+    assert logs_on["style_cls_g"] == pytest.approx(expected, rel=1e-5)
+    assert float(total_on - total_off) == pytest.approx(0.5 * expected, rel=1e-4)
+    # the discriminator learns the classifier from real windows, not from translations
+    _, logs_plain = off.discriminator(m, x, fake_in, r1=False)
+    assert "d_style_cls" not in logs_plain
+    loss, logs_d = on.discriminator(m, x, fake_in, r1=False)
+    with torch.no_grad():
+        real_x, real_m = d(x.disc_input)[0][:, :3].mean(-1), d(m.disc_input)[0][:, :3].mean(-1)
+    ce = torch.nn.functional.cross_entropy
+    expected_d = 0.5 * float(ce(real_x, x.style) + ce(real_m, m.style))
+    assert logs_d["d_style_cls"] == pytest.approx(expected_d, rel=1e-5)
+    plain, _ = off.discriminator(m, x, fake_in, r1=False)
+    assert float((loss - plain).detach()) == pytest.approx(0.5 * expected_d, rel=1e-4)
+    assert 0.0 <= logs_d["d_style_acc_real"] <= 1.0 and 0.0 <= logs_d["d_style_acc_fake"] <= 1.0

@@ -37,6 +37,12 @@ One step, for a batch of B content windows ``m`` (style s):
   the translations to x (and r) must pass the head of m's label (not in the paper). The
   style heads judge style but not what is performed, and translations of raises passed as
   waves.
+- with ``w_style_cls``: the style heads' scores, averaged over time, are also logits of a
+  19-way style classifier: the discriminator learns to classify real m and x windows by
+  their style (cross-entropy), and the translation to x must be classified as x's style
+  (StarGAN's domain classification, with the classifier trained on reals only; not in the
+  paper). The hinge heads ask only whether a window is a real one of style t, not whether
+  it is more t than any other style, which is what a style classifier judges.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -131,6 +137,8 @@ class TrainConfig:
     hand_speed_ratio: float = 1.5
     # the discriminator's content heads judge whether a translation performs m's label
     w_content_adv: float = 0.0
+    # the style heads also classify: real windows by their style, the translation to x as x's
+    w_style_cls: float = 0.0
     content_head_lr_scale: float = 10.0  # a head added to a trained discriminator catches up
     amplitude_lr_scale: float = 10.0  # the same for what keep_amplitude adds to a generator
     triplet_margin: float = 5.0
@@ -374,6 +382,10 @@ class Losses:
         keep = label >= 0
         return self.pick(scores[keep], self.g.cfg.num_styles + label[keep])
 
+    def style_logits(self, scores: torch.Tensor) -> torch.Tensor:
+        """The style heads' scores ``(B, S + contents, T')`` averaged over time: ``(B, S)``."""
+        return scores[:, : self.g.cfg.num_styles].mean(dim=-1)
+
     @staticmethod
     def hinge_mean(x: torch.Tensor) -> torch.Tensor:
         return x.mean() if x.numel() else x.new_zeros(())
@@ -408,6 +420,9 @@ class Losses:
             per_style = onehot.T @ real_feats / onehot.sum(0).clamp_min(1)[:, None]
             target = per_style[x.style]
         fm = F.l1_loss(feats.mean(dim=-1), target)
+        style_cls = torch.zeros(())
+        if cfg.w_style_cls > 0:
+            style_cls = F.cross_entropy(self.style_logits(scores), x.style)
 
         cycle, raised, lifted, amplitude, speed = (torch.zeros(()) for _ in range(5))
         content_adv = torch.zeros(())
@@ -468,13 +483,14 @@ class Losses:
             + cfg.w_hand_amplitude * amplitude
             + cfg.w_hand_speed * speed
             + ramp * cfg.w_content_adv * content_adv
+            + ramp * cfg.w_style_cls * style_cls
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
             "joint": joint, "triplet": trip, "content_cycle": cycle,
             "raised_hands_cm": raised * Fe.LEG, "lifted_hands_cm": lifted * Fe.LEG,
             "hand_amplitude": amplitude, "hand_speed": speed,
-            "content_adv_g": content_adv,
+            "content_adv_g": content_adv, "style_cls_g": style_cls,
             "total_g": total,
         }  # fmt: skip
         wild_in = None if wild_in is None else wild_in.detach()
@@ -502,6 +518,20 @@ class Losses:
         fake_loss = F.relu(1 + scores_f).mean()
         total = real + fake_loss
         logs = {"d_real": float(real.detach()), "d_fake": float(fake_loss.detach())}
+        if self.cfg.w_style_cls > 0:
+            logits_x, logits_m = self.style_logits(all_x), self.style_logits(all_m)
+            cls = 0.5 * (F.cross_entropy(logits_x, x.style) + F.cross_entropy(logits_m, m.style))
+            total = total + self.cfg.w_style_cls * cls
+            with torch.no_grad():
+                fake_right = self.style_logits(all_f).argmax(dim=1) == x.style
+                real_right = torch.cat(
+                    [logits_x.argmax(1) == x.style, logits_m.argmax(1) == m.style]
+                )
+            logs |= {
+                "d_style_cls": float(cls.detach()),
+                "d_style_acc_real": float(real_right.float().mean()),
+                "d_style_acc_fake": float(fake_right.float().mean()),
+            }
         if self.d.content_head is not None:
             content_x = self.pick_content(all_x, x.label)
             real_c = 0.5 * (
