@@ -126,12 +126,22 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     grown = torch.load(ckpt, map_location="cpu", weights_only=False)
     assert grown["step"] == 21 and grown["model_config"]["decoder_resblocks"] == 3
     assert "decoder.res.2.conv2.weight" in grown["generator"]
+    # the content-style probe starts fresh, and is kept and resumed with its optimizer
+    T.main(args + ["--resume", "--w-content-style", "1.0"])
+    probed = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert probed["step"] == 24 and probed["probe"]["weight"].shape[0] == len(probed["styles"])
+    assert probed["opt_probe"]["state"]
+    T.main(args + ["--resume"])
+    reloaded = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert reloaded["step"] == 27
+    steps = [float(o["opt_probe"]["state"][0]["step"]) for o in (probed, reloaded)]
+    assert steps == [3.0, 6.0]  # Adam went on from the saved state
     with pytest.raises(SystemExit):
         T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
     # a run whose validation reconstruction drifts past diverged_factor x its best stops
     # and leaves the last checkpoint as it was (a factor under 1 trips at the first check)
     before = ckpt.read_bytes()
-    with pytest.raises(SystemExit, match="diverged at step 24: validation rec_pos_cm"):
+    with pytest.raises(SystemExit, match="diverged at step 30: validation rec_pos_cm"):
         T.main(args + ["--resume", "--diverged-factor", "0.5"])
     assert ckpt.read_bytes() == before
 
@@ -451,3 +461,65 @@ def test_style_heads_classify_reals_and_translations_only_when_weighted():
     plain, _ = off.discriminator(m, x, fake_in, r1=False)
     assert float((loss - plain).detach()) == pytest.approx(0.5 * expected_d, rel=1e-4)
     assert 0.0 <= logs_d["d_style_acc_real"] <= 1.0 and 0.0 <= logs_d["d_style_acc_fake"] <= 1.0
+
+
+def test_content_style_probe_learns_style_and_the_encoder_answers_the_content_prior():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    g, d = M.Translator(cfg), M.Discriminator(cfg)
+    m, n, x = (random_batch(3, 32, s) for s in ([0, 1, 2], [0, 1, 2], [1, 2, 0]))
+    m.label = torch.tensor([0, 1, -1])  # the last window has no content label
+    probe = torch.nn.Linear(2 * cfg.content_channels[-1], 3)
+    prior = torch.tensor([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]])
+    stats = T.Standardizer(identity_stats())
+    on = T.Losses(g, d, stats, T.TrainConfig(w_content_style=2.0), probe, prior)
+    off = T.Losses(g, d, stats, T.TrainConfig())
+    torch.manual_seed(1)
+    total, logs, *_ = on.generator(m, n, x)
+    torch.manual_seed(1)
+    total_off, logs_off, *_ = off.generator(m, n, x)
+    with torch.no_grad():
+        z = g.content_encoder(m.content)
+        logits = probe(torch.cat([z.mean(-1), z.std(-1)], dim=1))
+        logp = torch.log_softmax(logits[:2], dim=1)
+        kl = (
+            sum(
+                float((p[p > 0] * (p[p > 0].log() - lp[p > 0])).sum())
+                for p, lp in zip(prior, logp, strict=True)
+            )
+            / 2
+        )
+        ce = float(torch.nn.functional.cross_entropy(logits, m.style))
+    assert logs_off["content_style_kl"] == 0.0 and logs_off["probe_ce"] == 0.0
+    assert logs["content_style_kl"] == pytest.approx(kl, rel=1e-4)
+    assert logs["probe_ce"] == pytest.approx(ce, rel=1e-4)
+    # the probe's loss is added to the total but leaves the logged generator total alone
+    assert float(total.detach()) == pytest.approx(logs["total_g"] + ce, rel=1e-4)
+    assert logs["total_g"] - logs_off["total_g"] == pytest.approx(2.0 * kl, rel=1e-3)
+    total.backward()
+    # the encoder gets the KL's gradient, the probe the cross-entropy's only
+    assert g.content_encoder.first.weight.grad.abs().sum() > 0
+    probe_grad = probe.weight.grad.clone()
+    probe.zero_grad()
+    summary = torch.cat([z.mean(-1), z.std(-1)], dim=1)
+    torch.nn.functional.cross_entropy(probe(summary), m.style).backward()
+    assert torch.allclose(probe_grad, probe.weight.grad, atol=1e-6)
+
+
+def test_style_prior_spreads_each_label_over_the_styles_that_perform_it():
+    from training.translator import train as T
+    from training.translator.data import EncodedClip
+
+    def clip(style: int, label: str | None, frames: int) -> EncodedClip:
+        z = np.zeros((frames, 1), np.float32)
+        return EncodedClip(z, z, z[None], style, f"take{style}{label}", label)
+
+    train = [clip(0, "walk", 100), clip(0, "run", 300), clip(1, "walk", 50), clip(2, None, 10)]
+    prep = T.Prepared(["a", "b", "c"], ["run", "walk", "wave"], train, [], [], identity_stats())
+    prior = T.style_prior(prep, {"run": 0, "walk": 1, "wave": 2})
+    # walk: a quarter of style a's frames, all of style b's
+    assert prior[1].tolist() == pytest.approx([0.2, 0.8, 0.0])
+    assert prior[0].tolist() == pytest.approx([1.0, 0.0, 0.0])
+    assert prior[2].tolist() == pytest.approx([1 / 3] * 3)  # nobody performs it
