@@ -94,18 +94,23 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 10.0, (0.6, 0.0), 40.0)
     t.add(
         ES.Verdict("angry", "sad", "walk", "run", "walk", 2.0, -30.0, (0.0, 0.0), 50.0),
-        "angry", "walk", source,
+        "angry", "walk", source, "sad",
     )  # fmt: skip
     t.add(
         ES.Verdict("sad", "sad", "run", "run", "walk", 4.0, -40.0, (0.0, 0.0), 40.0),
-        "angry", "run", source,
+        "angry", "run", source, "sad",
     )  # fmt: skip
     t.add(
         ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", 3.0, 12.5, (0.9, 0.7), 0.0),
-        "angry", "wave-left-hand", source,
+        "angry", "wave-left-hand", source, "sad",
     )  # fmt: skip
     row = t.summary()
     assert row["style_accuracy"] == 0.3333 and row["style_accuracy_linear"] == 0.0
+    assert row["style_as_source"] == 0.6667  # two of three read as sad, the content's style
+    own, unlabelled = ES.Tally(), ES.Tally()
+    own.add(source, "sad", "walk", source, "sad")  # sent to its own style: not counted
+    unlabelled.add(source, "angry", "walk", source)
+    assert own.summary()["style_as_source"] is None is unlabelled.summary()["style_as_source"]
     assert row["content_accuracy"] == 0.6667 and row["content_accuracy_conv"] == 0.3333
     assert row["content_accuracy_all_takes"] == 0.6667
     assert row["content_accuracy_all_takes_merged"] == 0.6667  # run is not a walk
@@ -123,7 +128,8 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     assert "hand actions" not in table  # a split no clip fell into is left out, not a crash
     assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
     assert (
-        "| translator | 3 | 33.3% | 0.0% | 66.7% | 33.3% | 66.7% | 66.7% | 3.0 | +12.5 (1) "
+        "| translator | 3 | 33.3% | 0.0% | 66.7% | 66.7% | 33.3% | 66.7% | 66.7% | 3.0 "
+        "| +12.5 (1) "
         "| 50.0% | 16.7 |" in table
     )
     assert "- translator: run -> walk: 1" in table
