@@ -710,12 +710,11 @@ def style_prior(prep: Prepared, label_index: dict[str, int]) -> torch.Tensor:
     share of that style's training frames (the sampler draws styles alike), rows summing
     to 1; a label no training clip performs is spread evenly."""
     frames = np.zeros((len(label_index), len(prep.styles)))
-    for c in prep.train:
-        if c.label in label_index:
-            frames[label_index[c.label], c.style] += c.num_frames
     per_style = np.zeros(len(prep.styles))
     for c in prep.train:
         per_style[c.style] += c.num_frames
+        if c.label in label_index:
+            frames[label_index[c.label], c.style] += c.num_frames
     share = frames / np.maximum(per_style, 1)[None]
     totals = share.sum(axis=1, keepdims=True)
     prior = np.where(totals > 0, share / np.maximum(totals, 1e-12), 1.0 / len(prep.styles))
@@ -868,7 +867,8 @@ def train(
     if cfg.w_content_style > 0:
         probe = torch.nn.Linear(2 * model_cfg.content_channels[-1], model_cfg.num_styles)
         opt_probe = torch.optim.Adam(probe.parameters(), lr=cfg.probe_lr)
-    losses = Losses(g, d, norm, cfg, probe, style_prior(prep, label_index))
+    prior = style_prior(prep, label_index) if probe is not None else None
+    losses = Losses(g, d, norm, cfg, probe, prior)
     amplitude = [p for name, p in g.named_parameters() if name.endswith(AMPLITUDE_PARAMETERS)]
     opt_g = torch.optim.Adam(
         [p for name, p in g.named_parameters() if not name.endswith(AMPLITUDE_PARAMETERS)],
