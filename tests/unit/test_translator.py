@@ -136,12 +136,21 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     assert reloaded["step"] == 27
     steps = [float(o["opt_probe"]["state"][0]["step"]) for o in (probed, reloaded)]
     assert steps == [3.0, 6.0]  # Adam went on from the saved state
+    # a content bottleneck joins a trained model, and the narrowed model goes on
+    T.main(args + ["--resume", "--content-bottleneck", "8"])
+    narrowed = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert narrowed["step"] == 30 and narrowed["model_config"]["content_bottleneck"] == 8
+    assert narrowed["generator"]["content_encoder.bottleneck.0.weight"].shape[:2] == (8, 160)
+    T.main(args + ["--resume"])
+    assert torch.load(ckpt, map_location="cpu", weights_only=False)["step"] == 33
+    with pytest.raises(SystemExit, match="already has a bottleneck"):
+        T.main(args + ["--resume", "--content-bottleneck", "8"])
     with pytest.raises(SystemExit):
         T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
     # a run whose validation reconstruction drifts past diverged_factor x its best stops
     # and leaves the last checkpoint as it was (a factor under 1 trips at the first check)
     before = ckpt.read_bytes()
-    with pytest.raises(SystemExit, match="diverged at step 30: validation rec_pos_cm"):
+    with pytest.raises(SystemExit, match="diverged at step 36: validation rec_pos_cm"):
         T.main(args + ["--resume", "--diverged-factor", "0.5"])
     assert ckpt.read_bytes() == before
 
@@ -219,6 +228,72 @@ def test_grown_decoder_translates_as_before_then_learns_with_the_old_moments():
     with torch.no_grad():
         p = h.decoder.mlp(h.style3d(style)).split(h.decoder.param_sizes, dim=1)[2]
         assert float((1.0 + p.split(24, dim=1)[2]).abs().max()) > 0
+
+
+def test_narrowed_content_code_starts_as_its_principal_projection():
+    from types import SimpleNamespace
+
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, content_channels=[16, 24])
+    cfg.style_channels, cfg.style_dim, cfg.mlp_hidden = [16, 16, 16], 8, 12
+    g = M.Translator(cfg)
+    opt = torch.optim.Adam(g.parameters(), lr=1e-3)
+    content, style = (
+        torch.randn(2, Fe.CONTENT_CHANNELS, 32),
+        torch.randn(2, Fe.STYLE3D_CHANNELS, 32),
+    )
+    opt.zero_grad()
+    g(content, style).square().mean().backward()
+    opt.step()
+    ckpt = {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+    rng = np.random.default_rng(0)
+    kinds = {"content": Fe.CONTENT_CHANNELS, "style3d": Fe.STYLE3D_CHANNELS, "style2d": 32}
+    stats = Fe.FeatureStats(
+        {k: rng.normal(size=c).astype(np.float32) for k, c in kinds.items()},
+        {k: rng.uniform(0.5, 2, size=c).astype(np.float32) for k, c in kinds.items()},
+    )
+    clips = [SimpleNamespace(content=rng.normal(size=(f, Fe.CONTENT_CHANNELS))) for f in (40, 64)]
+    prep = SimpleNamespace(stats=stats, train=clips)
+    g.eval()
+    windows = [c.content[s : s + 16].T for c in clips for s in range(0, len(c.content) - 15, 8)]
+    x = (
+        torch.tensor(np.stack(windows), dtype=torch.float32)
+        - torch.tensor(stats.mean["content"])[:, None]
+    ) / torch.tensor(stats.std["content"])[:, None]
+    with torch.no_grad():
+        z = g.content_encoder(x)
+    flat = z.transpose(1, 2).reshape(-1, 24).double().numpy()
+    mean = flat.mean(0)
+    basis = np.linalg.svd(flat - mean, full_matrices=False)[2][:6]
+    expected = (flat - mean) @ basis.T @ basis + mean
+
+    narrowed = T.narrow_content(ckpt, 6, prep, window=16)
+    h = M.Translator(M.ModelConfig(**narrowed["model_config"])).eval()
+    h.load_state_dict(narrowed["generator"])
+    with torch.no_grad():
+        code = h.content_encoder(x).transpose(1, 2).reshape(-1, 24).double().numpy()
+    np.testing.assert_allclose(code, expected, atol=1e-4)
+    assert np.abs(code - flat).max() > 1e-2  # six of 24 channels lose something
+    # the decoder and everything else keep their weights and Adam moments
+    for name, value in g.state_dict().items():
+        assert torch.equal(narrowed["generator"][name], value)
+    moved = torch.optim.Adam(h.parameters(), lr=1e-3)
+    moved.load_state_dict(narrowed["opt_g"])
+    old = dict(g.named_parameters())
+    for name, p in h.named_parameters():
+        if "bottleneck" in name:
+            assert p not in moved.state
+        elif old[name] in opt.state:  # the 2D style encoder, unused here, has none
+            assert torch.equal(moved.state[p]["exp_avg"], opt.state[old[name]]["exp_avg"])
+    assert len(moved.state) == len(opt.state) > 20
+    # at full width the bottleneck changes nothing
+    full = T.narrow_content(ckpt, 24, prep, window=16)
+    f = M.Translator(M.ModelConfig(**full["model_config"])).eval()
+    f.load_state_dict(full["generator"])
+    with torch.no_grad():
+        torch.testing.assert_close(f.content_encoder(x), z, atol=1e-4, rtol=1e-4)
 
 
 def random_batch(batch: int, frames: int, styles: list[int]):

@@ -43,6 +43,9 @@ class ModelConfig:
     num_contents: int = 0  # > 0: the discriminator also judges each content label
     kernel: int = 5
     keep_amplitude: bool = False  # every instance norm may learn to keep some of x's amplitude
+    # > 0: the content code passes through this many channels (a linear squeeze and
+    # unsqueeze), the paper's restricted content dimensionality against copying the style
+    content_bottleneck: int = 0
 
     @property
     def content_down(self) -> int:
@@ -176,6 +179,14 @@ class ContentEncoder(nn.Module):
         self.norms = nn.ModuleList(
             Norm(c, cfg.keep_amplitude, level) for level, c in enumerate(chans)
         )
+        self.bottleneck = (
+            nn.Sequential(
+                nn.Conv1d(chans[-1], cfg.content_bottleneck, 1),
+                nn.Conv1d(cfg.content_bottleneck, chans[-1], 1),
+            )
+            if cfg.content_bottleneck
+            else None
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = F.leaky_relu(self.norms[0](self.first(x)), 0.2)
@@ -183,7 +194,7 @@ class ContentEncoder(nn.Module):
             h = F.leaky_relu(norm(layer(h)), 0.2)
         for block in self.res:
             h = block(h)
-        return h
+        return h if self.bottleneck is None else self.bottleneck(h)
 
 
 class StyleEncoder(nn.Module):

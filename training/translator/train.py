@@ -782,7 +782,23 @@ def grow_decoder(ckpt: dict, extra: int) -> dict:
                 ].clone()
     new_g.load_state_dict(state)
 
-    opt = ckpt["opt_g"]
+    def widen_moments(name: str, m: dict) -> dict:
+        if name.startswith(last):
+            fill = torch.zeros((rows, *m["exp_avg"].shape[1:]))
+            m["exp_avg"] = widened(m["exp_avg"], fill)
+            m["exp_avg_sq"] = widened(m["exp_avg_sq"], fill)
+        return m
+
+    return ckpt | {
+        "model_config": new_cfg.to_dict(),
+        "generator": new_g.state_dict(),
+        "opt_g": _moved_adam(ckpt["opt_g"], old_g, new_g, widen_moments),
+    }
+
+
+def _moved_adam(opt: dict, old_g: Translator, new_g: Translator, adjust=None) -> dict:
+    """``opt_g``'s state for ``new_g``: each old parameter's Adam moments follow it to its
+    new place (``adjust(name, moments)`` may reshape them); new parameters start with none."""
     old_names = _optimizer_names(old_g, len(opt["param_groups"]))
     new_names = _optimizer_names(new_g, len(opt["param_groups"]))
     moments = {}
@@ -796,16 +812,47 @@ def grow_decoder(ckpt: dict, extra: int) -> dict:
         for name in names:
             if name in moments:
                 m = dict(moments[name])
-                if name.startswith(last):
-                    fill = torch.zeros((rows, *m["exp_avg"].shape[1:]))
-                    m["exp_avg"] = widened(m["exp_avg"], fill)
-                    m["exp_avg_sq"] = widened(m["exp_avg_sq"], fill)
-                new_state[index] = m
+                new_state[index] = adjust(name, m) if adjust else m
             index += 1
+    return {"state": new_state, "param_groups": groups}
+
+
+@torch.no_grad()
+def narrow_content(ckpt: dict, channels: int, prep: Prepared, window: int) -> dict:
+    """``ckpt`` with its content code squeezed through ``channels`` channels, starting as the
+    projection onto the codes' top principal components (over the training clips' windows,
+    half-overlapping): the generator starts as that projection leaves it, and learns on."""
+    old_cfg = ModelConfig(**ckpt["model_config"])
+    if old_cfg.content_bottleneck:
+        raise SystemExit("the checkpoint's content code already has a bottleneck")
+    new_cfg = dataclasses.replace(old_cfg, content_bottleneck=channels)
+    old_g, new_g = Translator(old_cfg), Translator(new_cfg)
+    old_g.load_state_dict(ckpt["generator"])
+    old_g.eval()
+    norm = Standardizer(prep.stats)
+    windows = [
+        clip.content[start : start + window].T
+        for clip in prep.train
+        for start in range(0, len(clip.content) - window + 1, window // 2)
+    ]
+    codes = []
+    for i in range(0, len(windows), 256):
+        x = torch.from_numpy(np.stack(windows[i : i + 256]).astype(np.float32))
+        z = old_g.content_encoder(norm.content.standardize(x))
+        codes.append(z.transpose(1, 2).reshape(-1, z.shape[1]))
+    z = torch.cat(codes).double()
+    mean = z.mean(0)
+    basis = torch.linalg.svd(z - mean, full_matrices=False).Vh[:channels]  # (k, C)
+    state = new_g.state_dict() | ckpt["generator"]
+    state["content_encoder.bottleneck.0.weight"] = basis[:, :, None].float()
+    state["content_encoder.bottleneck.0.bias"] = -(basis @ mean).float()
+    state["content_encoder.bottleneck.1.weight"] = basis.T[:, :, None].float()
+    state["content_encoder.bottleneck.1.bias"] = mean.float()
+    new_g.load_state_dict(state)
     return ckpt | {
         "model_config": new_cfg.to_dict(),
         "generator": new_g.state_dict(),
-        "opt_g": {"state": new_state, "param_groups": groups},
+        "opt_g": _moved_adam(ckpt["opt_g"], old_g, new_g),
     }
 
 
@@ -827,10 +874,13 @@ def train(
     model_cfg: ModelConfig | None = None,
     keep_amplitude: bool = False,
     grow: int = 0,
+    bottleneck: int = 0,
 ) -> dict:
     """Train (or go on training) until ``cfg.steps``, or ``max_steps`` more steps.
     ``keep_amplitude`` turns :class:`Norm`'s kept amplitude on, for a resumed model too;
-    ``grow`` adds that many decoder blocks to a resumed model (:func:`grow_decoder`)."""
+    ``grow`` adds that many decoder blocks to a resumed model (:func:`grow_decoder`);
+    ``bottleneck`` squeezes the content code through that many channels, a resumed model's
+    by :func:`narrow_content`."""
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
@@ -841,12 +891,17 @@ def train(
     prep = prepare(cfg, ckpt["val_takes"] if ckpt else None)
     if ckpt is not None:
         prep.stats = stats_from_dict(ckpt["stats"])  # keep the statistics the weights know
+        if bottleneck:
+            ckpt = narrow_content(ckpt, bottleneck, prep, cfg.window)
+            model_cfg = ModelConfig(**ckpt["model_config"])
         if ckpt["styles"] != prep.styles:
             raise SystemExit(
                 f"checkpoint styles {ckpt['styles']} differ from the data's {prep.styles}"
             )
     model_cfg = model_cfg or ModelConfig()
     model_cfg.keep_amplitude |= keep_amplitude
+    if bottleneck and ckpt is None:
+        model_cfg.content_bottleneck = bottleneck
     model_cfg.num_styles = len(prep.styles)
     if cfg.w_content_adv > 0 and not model_cfg.num_contents:
         model_cfg.num_contents = len(prep.contents)
@@ -1101,6 +1156,13 @@ def main(argv: list[str] | None = None) -> None:
         help="with --resume: add this many AdaIN residual blocks to the decoder, each "
         "starting as the identity",
     )
+    parser.add_argument(
+        "--content-bottleneck",
+        type=int,
+        default=0,
+        help="squeeze the content code through this many channels (a resumed model's "
+        "starts as the projection onto its codes' top principal components)",
+    )
     args = parser.parse_args(argv)
     if args.grow_decoder and not args.resume:
         parser.error("--grow-decoder needs --resume (a fresh model takes its size from the config)")
@@ -1145,4 +1207,5 @@ def main(argv: list[str] | None = None) -> None:
         model_cfg,
         args.keep_amplitude,
         args.grow_decoder,
+        args.content_bottleneck,
     )
