@@ -135,6 +135,43 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     assert "- translator: run -> walk: 1" in table
 
 
+def test_gap_intervals_resample_takes_and_need_the_same_clips():
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
+    right = ES.Verdict("angry", "angry", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
+    wrong = ES.Verdict("sad", "sad", "run", "run", "run", 2.0, 0.0, (0.0, 0.0), 0.0)
+    transfers, real = ES.Tally(), ES.Tally()
+    # take a: the transfer right 2 of 4 times, the real clip 4 of 4; take b: both 4 of 4
+    for take, outs in (("a", [right, wrong, right, wrong]), ("b", [right] * 4)):
+        for out in outs:
+            transfers.add(out, "angry", "walk", source, "sad", take)
+            real.add(right, "angry", "walk", source, "sad", take)
+    g = ES.gap_interval(transfers, real, "style", draws=400)
+    assert g["gap"] == -0.25 and g["takes"] == 2
+    # resampling two takes gives means of -0.5 (a twice), -0.25 or 0 (b twice), nothing else
+    assert g["low"] == -0.5 and g["high"] == 0.0
+    same = ES.gap_interval(real, real, "content_all")
+    assert same == {"gap": 0.0, "low": 0.0, "high": 0.0, "takes": 2}
+    assert ES.gap_interval(ES.Tally(), ES.Tally(), "style") is None
+    other = ES.Tally()
+    other.add(right, "angry", "walk", source, "sad", "c")
+    with pytest.raises(ValueError, match="same clips"):
+        ES.gap_interval(transfers, other, "style")
+    rows = {"translator": transfers, "translator (pairs with a real target)": transfers,
+            "real target": real, "unchanged": real}  # fmt: skip
+    found = ES.gaps(rows, "translator")
+    assert found["style: translator (pairs) - real target"]["gap"] == -0.25
+    assert found["content (all takes): translator - unchanged"]["gap"] == -0.25
+    report = {
+        "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
+        "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
+        "rows": {"translator": transfers.summary()}, "per_style": {},
+        "per_style_real_target": {}, "gaps": found,
+    }  # fmt: skip
+    assert "- style: translator (pairs) - real target: -25.0% (-50.0% to +0.0%, 2 takes)" in (
+        ES.markdown(report)
+    )
+
+
 def test_merged_content_counts_a_turning_walk_read_as_a_walk_and_a_wave_by_either_name():
     t = ES.Tally()
     source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 90.0)
