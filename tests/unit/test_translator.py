@@ -288,6 +288,11 @@ def test_narrowed_content_code_starts_as_its_principal_projection():
         elif old[name] in opt.state:  # the 2D style encoder, unused here, has none
             assert torch.equal(moved.state[p]["exp_avg"], opt.state[old[name]]["exp_avg"])
     assert len(moved.state) == len(opt.state) > 20
+    for width in (0, 25):
+        with pytest.raises(SystemExit, match="the content code has 24 channels"):
+            T.narrow_content(ckpt, width, prep, window=16)
+    with pytest.raises(ValueError, match="content_bottleneck 25"):
+        M.ModelConfig(content_bottleneck=25, content_channels=[16, 24])
     # at full width the bottleneck changes nothing
     full = T.narrow_content(ckpt, 24, prep, window=16)
     f = M.Translator(M.ModelConfig(**full["model_config"])).eval()

@@ -58,6 +58,11 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if 2 ** max(self.content_down, self.style_down, len(self.disc_channels) - 1) > STRIDE:
             raise ValueError(f"down-sampling exceeds STRIDE={STRIDE}")
+        if not 0 <= self.content_bottleneck <= self.content_channels[-1]:
+            raise ValueError(
+                f"content_bottleneck {self.content_bottleneck} must be 0 (none) or narrower "
+                f"than the content code's {self.content_channels[-1]} channels"
+            )
 
     def to_dict(self) -> dict:
         return asdict(self)

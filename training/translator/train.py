@@ -825,6 +825,11 @@ def narrow_content(ckpt: dict, channels: int, prep: Prepared, window: int) -> di
     old_cfg = ModelConfig(**ckpt["model_config"])
     if old_cfg.content_bottleneck:
         raise SystemExit("the checkpoint's content code already has a bottleneck")
+    if not 0 < channels <= old_cfg.content_channels[-1]:
+        raise SystemExit(
+            f"--content-bottleneck {channels}: the content code has "
+            f"{old_cfg.content_channels[-1]} channels"
+        )
     new_cfg = dataclasses.replace(old_cfg, content_bottleneck=channels)
     old_g, new_g = Translator(old_cfg), Translator(new_cfg)
     old_g.load_state_dict(ckpt["generator"])
