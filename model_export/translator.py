@@ -397,6 +397,7 @@ def main(argv: list[str] | None = None) -> dict:
             "validation_takes": len(meta["val_takes"]),
             "stride": STRIDE,
             "receptive_field": receptive_field(cfg),
+            "window": int(meta["train_config"]["window"]),
             "fps": Fe.FPS,
             "style_dim": cfg.style_dim,
             "code_channels": cfg.content_channels[-1],

@@ -62,7 +62,8 @@ CODE_NORM_LIMIT = 1.25
 # span than training did. Content is therefore encoded and decoded in overlapping windows
 # of this length, blended with Hann weights. On the 51 held-out Bandai takes, decoding
 # each clip with its own style code gives joint positions 3.1 cm from the clip's (7.7 cm
-# a whole clip at once; 4.1 cm with 48-frame windows, 5.5 cm with 64).
+# a whole clip at once; 4.1 cm with 48-frame windows, 5.5 cm with 64). A bundle names its
+# training length (``extra.window``); those exported before it did trained on 32.
 WINDOW = 32
 WINDOW_HOP = WINDOW // 2
 WINDOWS_PER_CALL = 256  # bounds the batch (memory) on long clips
@@ -169,6 +170,7 @@ class TranslatorEngine(Engine):
         self.style_dim = int(self.codes.shape[1])
         self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
         self.min_frames = padded_length(1, int(extra.get("receptive_field", BUCKET)))
+        self.window = int(extra.get("window", WINDOW))
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
             raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
@@ -192,27 +194,29 @@ class TranslatorEngine(Engine):
         return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
 
     @staticmethod
-    def _windows(x: np.ndarray) -> tuple[np.ndarray, int, int]:
-        """``x (F, C)`` standardised -> windows ``(N, C, WINDOW)`` float32 at
-        :func:`window_starts`, the offset of frame 0 and the length they cover (a clip
-        shorter than a window is mirrored at both ends to one)."""
+    def _windows(x: np.ndarray, length: int = WINDOW) -> tuple[np.ndarray, int, int]:
+        """``x (F, C)`` standardised -> windows ``(N, C, length)`` float32 at
+        :func:`window_starts` (hop half a window), the offset of frame 0 and the length they
+        cover (a clip shorter than a window is mirrored at both ends to one)."""
         offset = 0
-        if len(x) < WINDOW:
-            x, offset = pad_mirrored(x, WINDOW)
-        windows = np.stack([x[s : s + WINDOW] for s in window_starts(len(x))])
+        if len(x) < length:
+            x, offset = pad_mirrored(x, length)
+        starts = window_starts(len(x), length, length // 2)
+        windows = np.stack([x[s : s + length] for s in starts])
         windows = np.ascontiguousarray(windows.transpose(0, 2, 1), dtype=np.float32)
         return windows, offset, len(x)
 
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:
-        """Decoded windows ``(N, C, WINDOW)`` (as :meth:`_windows` cut them) -> ``(frames, C)``,
+        """Decoded windows ``(N, C, length)`` (as :meth:`_windows` cut them) -> ``(frames, C)``,
         overlaps blended with Hann weights (every weight > 0, so every frame is covered)."""
-        weight = np.hanning(WINDOW + 2)[1:-1, None]
+        length = windows.shape[2]
+        weight = np.hanning(length + 2)[1:-1, None]
         total = np.zeros((frames, 1))
         out = np.zeros((frames, windows.shape[1]))
-        for window, start in zip(windows, window_starts(frames), strict=True):
-            out[start : start + WINDOW] += weight * window.T
-            total[start : start + WINDOW] += weight
+        for window, start in zip(windows, window_starts(frames, length, length // 2), strict=True):
+            out[start : start + length] += weight * window.T
+            total[start : start + length] += weight
         return (out / total).astype(np.float32)
 
     def _style_net(self, graph: str, kind: str, features: np.ndarray) -> np.ndarray:
@@ -343,7 +347,7 @@ class TranslatorEngine(Engine):
             x_content = Fe.standardize(enc.content, self.stats, "content")
             x_style, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
         with timer.stage("encode"):
-            windows, offset, length = self._windows(x_content)
+            windows, offset, length = self._windows(x_content, self.window)
             latents = [
                 self.run("content_encoder", {"content": windows[i : i + WINDOWS_PER_CALL]})[0]
                 for i in range(0, len(windows), WINDOWS_PER_CALL)

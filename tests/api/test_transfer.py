@@ -149,14 +149,16 @@ def test_windows_cover_every_frame(frames):
     assert covered.min() >= 1
 
 
-def test_blending_windows_of_one_signal_gives_it_back():
-    frames = 3 * WINDOW + 5
+@pytest.mark.parametrize("window", [WINDOW, 64])  # 64: a bundle trained on longer windows
+def test_blending_windows_of_one_signal_gives_it_back(window):
+    frames = 3 * window + 5
     signal = np.random.default_rng(0).normal(size=(frames, 4)).astype(np.float32)
-    windows, offset, length = TranslatorEngine._windows(signal)
-    assert offset == 0 and length == frames and windows.shape[1:] == (4, WINDOW)
+    windows, offset, length = TranslatorEngine._windows(signal, window)
+    assert offset == 0 and length == frames and windows.shape[1:] == (4, window)
+    assert len(windows) == len(window_starts(frames, window, window // 2))
     np.testing.assert_allclose(TranslatorEngine._blend(windows, length), signal, atol=1e-6)
-    short, offset, length = TranslatorEngine._windows(signal[:5])  # mirrored up to a window
-    assert short.shape == (1, 4, WINDOW) and length == WINDOW
+    short, offset, length = TranslatorEngine._windows(signal[:5], window)  # mirrored to one
+    assert short.shape == (1, 4, window) and length == window
     np.testing.assert_array_equal(short[0, :, offset : offset + 5], signal[:5].T)
 
 

@@ -213,6 +213,8 @@ def test_shipped_graphs_match_the_checkpoint(tmp_path):
     paths = {graph: MODELS / spec.file for graph, spec in entry.graphs.items()}
     figures = X.parity(g, paths, lengths=(32, 100), batches=(1, 3))
     assert all(f["max_abs"] < X.ATOL for f in figures.values()), figures
+    # the service decodes in windows of the length the model trained on (32 before bundles said)
+    assert int(entry.extra.get("window", 32)) == int(meta["train_config"]["window"])
     shipped = Fe.load_stats(MODELS / entry.extra["stats"])
     for kind in Fe.KINDS:
         np.testing.assert_array_equal(shipped.mean[kind], stats.mean[kind])
