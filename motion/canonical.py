@@ -152,3 +152,27 @@ def check_motion(motion: Motion, what: str) -> None:
             f"{motion.skeleton.num_joints} joints at {motion.fps:g} fps",
             kind="unusable",
         )
+
+
+# Each joint's counterpart on the other side (itself on the midline).
+MIRROR_INDEX = np.array(
+    [INDEX[n[:-1] + {"L": "R", "R": "L"}[n[-1]]] if n[-2:] in ("_L", "_R") else i
+     for i, n in enumerate(JOINTS)]
+)  # fmt: skip
+
+
+def mirror_rotations(lrot: np.ndarray) -> np.ndarray:
+    """Local rotations ``(F, 22, 4)`` (x, y, z, w) of the canonical skeleton reflected
+    through its midline plane (x -> -x): each joint takes its counterpart's rotation,
+    reflected. Reflecting a rotation keeps its x component and negates y and z (the axis
+    is mirrored and, a reflection being improper, the sense flips)."""
+    return np.asarray(lrot)[:, MIRROR_INDEX] * np.array([1.0, -1.0, -1.0, 1.0])
+
+
+def mirrored(motion: Motion) -> Motion:
+    """A canonical motion performed the other way round (left and right swapped): its
+    global positions are the original's with x negated and sides exchanged. The canonical
+    skeleton is symmetric, so the offsets stay; a translation's x is negated."""
+    check_motion(motion, "mirroring")
+    lpos = np.asarray(motion.lpos)[:, MIRROR_INDEX] * np.array([-1.0, 1.0, 1.0])
+    return Motion(motion.skeleton, motion.fps, mirror_rotations(motion.lrot), lpos)

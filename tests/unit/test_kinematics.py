@@ -159,3 +159,24 @@ def test_root_velocities_of_straight_walk_point_forward():
     assert np.abs(turn).mean() < 1.0  # rad/s, a straight walk
     local = K.root_local(g, g[:, 0], facing)
     assert local.shape == g.shape
+
+
+def test_mirrored_motion_is_the_reflection_with_sides_swapped():
+    from scipy.spatial.transform import Rotation
+
+    from motion import canonical as C
+    from motion.skeleton import Motion
+
+    rng = np.random.default_rng(3)
+    frames = 7
+    lrot = Rotation.random(frames * len(C.JOINTS), random_state=4).as_quat()
+    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
+    lpos[:, 1] = rng.normal(scale=30.0, size=(frames, 3))  # the hips carry the travel
+    motion = Motion(C.SKELETON, C.FPS, lrot.reshape(frames, -1, 4), lpos)
+    mirror = C.mirrored(motion)
+    want = K.global_positions(motion)[:, C.MIRROR_INDEX] * np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(K.global_positions(mirror), want, atol=1e-9)
+    assert C.INDEX["Hand_R"] == C.MIRROR_INDEX[C.INDEX["Hand_L"]]
+    twice = C.mirrored(mirror)
+    np.testing.assert_allclose(twice.lrot, motion.lrot)
+    np.testing.assert_allclose(twice.lpos, motion.lpos)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,6 +16,7 @@ from motion import kinematics as K  # noqa: E402
 from motion import rotations as rot  # noqa: E402
 from tests.conftest import data_path  # noqa: E402
 from training import fk as tfk  # noqa: E402
+from training.translator import data as TD  # noqa: E402
 from training.translator import model as M  # noqa: E402
 
 
@@ -603,3 +605,27 @@ def test_style_prior_spreads_each_label_over_the_styles_that_perform_it():
     assert prior[1].tolist() == pytest.approx([0.2, 0.8, 0.0])
     assert prior[0].tolist() == pytest.approx([1.0, 0.0, 0.0])
     assert prior[2].tolist() == pytest.approx([1 / 3] * 3)  # nobody performs it
+
+
+def test_mirror_adds_each_training_clip_the_other_way_round_and_leaves_validation():
+    data_path("bandai", "dataset-1")
+    from training.translator import train as T
+
+    cfg = T.TrainConfig(clips_per_style=3, val_fraction=0.34, views=1)
+    plain = T.prepare(cfg)
+    both = T.prepare(dataclasses.replace(cfg, mirror=True))
+    assert both.val_takes == plain.val_takes
+    assert [c.take for c in both.val] == [c.take for c in plain.val]
+    assert len(both.train) == 2 * len(plain.train)
+    mirrors = both.train[len(plain.train) :]
+    assert all(m.take == f"{c.take}~mirrored" for c, m in zip(plain.train, mirrors, strict=True))
+    assert [m.style for m in mirrors] == [c.style for c in plain.train]
+    assert set(both.contents) == set(plain.contents) | {
+        TD.MIRRORED_CONTENT.get(label, label) for label in plain.contents
+    }
+    # left and right swapped: the lateral channels' means cancel
+    lateral = slice(0, None, 3)  # x of each root-local joint position
+    mean_x = np.concatenate([c.style3d for c in both.train])[:, lateral].mean(axis=0)
+    plain_x = np.concatenate([c.style3d for c in plain.train])[:, lateral].mean(axis=0)
+    middle = [i for i, j in enumerate(C.MIRROR_INDEX[1:]) if j == i + 1]
+    assert np.abs(mean_x[middle]).max() < 1e-3 < np.abs(plain_x[middle]).max()

@@ -51,3 +51,28 @@ def test_style_that_never_performs_the_content_where_one_does_not():
     # a content nobody performs: any other style
     jumpers = s.other_styles_not_performing(np.full(400, 2), ["jump"] * 400)
     assert set(jumpers.tolist()) == {0, 1}
+
+
+def test_a_mirrored_clip_swaps_sides_and_names_the_other_sided_action():
+    from scipy.spatial.transform import Rotation
+
+    from motion import canonical as C
+    from motion import kinematics as K
+    from training.data import Clip
+    from training.translator.data import mirrored_clip
+
+    frames = 5
+    lrot = Rotation.random(frames * len(C.JOINTS), random_state=1).as_quat()
+    root = np.random.default_rng(2).normal(scale=20.0, size=(frames, 3))
+    wave = Clip(
+        name="d_wave-left-hand_proud_001", dataset="d", take="d_wave-left-hand_proud_001",
+        lrot=lrot.reshape(frames, -1, 4).astype(np.float32), root=root.astype(np.float32),
+        style="proud", content="wave-left-hand",
+    )  # fmt: skip
+    mirror = mirrored_clip(wave)
+    assert (mirror.style, mirror.content) == ("proud", "wave-right-hand")
+    assert mirror.take == "d_wave-left-hand_proud_001~mirrored" != wave.take
+    want = K.global_positions(wave.motion)[:, C.MIRROR_INDEX] * np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(K.global_positions(mirror.motion), want, atol=1e-3)
+    bow = mirrored_clip(Clip(**{**wave.__dict__, "content": "bow"}))
+    assert bow.content == "bow"  # an action without a side keeps its name

@@ -12,7 +12,7 @@ projection costs about a millisecond per call.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,32 @@ class EncodedClip:
     @property
     def num_frames(self) -> int:
         return len(self.content)
+
+
+# What a Bandai action becomes performed the other way round; the rest keep their name (a
+# bye or a guide with the other hand is still one).
+MIRRORED_CONTENT = {
+    "walk-left": "walk-right", "walk-right": "walk-left",
+    "walk-turn-left": "walk-turn-right", "walk-turn-right": "walk-turn-left",
+    "raise-up-left-hand": "raise-up-right-hand", "raise-up-right-hand": "raise-up-left-hand",
+    "wave-left-hand": "wave-right-hand", "wave-right-hand": "wave-left-hand",
+}  # fmt: skip
+
+
+def mirrored_clip(clip: Clip) -> Clip:
+    """``clip`` performed with left and right swapped (``motion.canonical.mirrored``): the
+    same style (a style has no side), the action renamed where it names a side, and a take
+    of its own (``<take>~mirrored``)."""
+    root = np.asarray(clip.root) * np.array([-1.0, 1.0, 1.0], dtype=np.float32)
+    content = MIRRORED_CONTENT.get(clip.content, clip.content) if clip.content else None
+    return replace(
+        clip,
+        name=f"{clip.name}~mirrored",
+        take=f"{clip.take}~mirrored",
+        lrot=C.mirror_rotations(clip.lrot).astype(np.float32),
+        root=root.astype(np.float32),
+        content=content,
+    )
 
 
 def project_views(

@@ -168,6 +168,9 @@ class TrainConfig:
     # head and is drifting off the data, so stop and keep the last checkpoint
     diverged_factor: float = 1.5
     clips_per_style: int = 0  # > 0: a tiny subset, for smoke tests
+    # the training clips also performed with left and right swapped (a style has no side);
+    # validation stays as recorded
+    mirror: bool = False
     datasets: tuple[int, ...] = (1, 2)
 
 
@@ -201,6 +204,8 @@ def prepare(cfg: TrainConfig, val_takes: list[str] | None = None) -> Prepared:
         chosen = set(val_takes)
         train = [c for c in clips if c.take not in chosen]
         val = [c for c in clips if c.take in chosen]
+    if cfg.mirror:
+        train = train + [TD.mirrored_clip(c) for c in train]
     enc_train = TD.encode_clips(train, styles, cfg.window, cfg.views, cfg.seed)
     enc_val = TD.encode_clips(val, styles, cfg.window, 1, cfg.seed + 1)
     stats = Fe.compute_stats(
