@@ -99,6 +99,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import inspect
 import json
 import pickle
 import time
@@ -565,15 +566,36 @@ def train_classifiers(held_list: list, training: list, mirror: bool = True) -> C
     )
 
 
+def _feature_sources() -> list[Path]:
+    """The ``motion`` package's files: the classifiers' features are computed by it."""
+    return sorted((REPO / "motion").glob("*.py"))
+
+
+def classifier_code_key() -> str:
+    """A hash of the code that makes the classifiers (this module's features, classifiers
+    and their training, and the ``motion`` package they read motion through), so that an
+    edit of the report or the transfers keeps a cached set and an edit of what judges
+    retrains it."""
+    key = hashlib.sha256()
+    for part in (window_features, frame_features, halves, Classifiers, train_classifiers,
+                 ConvClipClassifier, FoldedClassifier, ClipClassifier):  # fmt: skip
+        key.update(inspect.getsource(part).encode())
+    key.update(repr((WINDOW, HOP, _MIRROR, _BODY_MIRROR)).encode())
+    for path in _feature_sources():
+        key.update(path.read_bytes())
+    return key.hexdigest()
+
+
 def classifiers_for(
     held_list: list, training: list, mirror: bool, cache: Path | None = None
 ) -> Classifiers:
     """:func:`train_classifiers`, kept in ``cache`` (a folder) when given: about ten minutes
     of a translator evaluation's thirteen on two cores. A kept set is used again only for
-    the same takes, labels and lengths and the same code of this module."""
+    the same takes, labels and lengths and the same code that makes classifiers
+    (:func:`classifier_code_key`)."""
     if cache is None:
         return train_classifiers(held_list, training, mirror)
-    key = hashlib.sha256(Path(__file__).read_bytes())
+    key = hashlib.sha256(classifier_code_key().encode())
     for group in (held_list, training):
         takes = sorted((c.take, c.style, c.content, len(c.lrot)) for c in group)
         key.update(json.dumps(takes).encode())

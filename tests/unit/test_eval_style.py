@@ -270,6 +270,20 @@ def test_classifiers_are_kept_and_trained_again_only_for_other_takes(tmp_path, m
     assert len(trained) == 5
 
 
+def test_the_classifier_cache_key_follows_the_code_that_judges(tmp_path, monkeypatch):
+    key = ES.classifier_code_key()
+    assert key == ES.classifier_code_key()  # stable
+    feature_code = tmp_path / "features.py"
+    feature_code.write_text("SCALE = 1.0\n")
+    monkeypatch.setattr(ES, "_feature_sources", lambda: [feature_code])
+    before = ES.classifier_code_key()
+    assert before != key
+    feature_code.write_text("SCALE = 2.0\n")  # the motion code the features come from
+    assert ES.classifier_code_key() != before
+    monkeypatch.setattr(ES, "HOP", ES.HOP + 1)  # a constant of the window statistics
+    assert len({key, before, ES.classifier_code_key()}) == 3
+
+
 def torch_equal(a, b) -> bool:
     return all(
         (p == q).all()
