@@ -863,7 +863,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         default=None,
         help="keep the trained classifiers in this folder and use them again while the "
-        "takes and this module's code are the same",
+        "takes and the code that makes the classifiers are the same",
     )
     p.add_argument(
         "--manifest",
