@@ -52,14 +52,14 @@ def mirrored_clip(clip: Clip) -> Clip:
     """``clip`` performed with left and right swapped (``motion.canonical.mirrored``): the
     same style (a style has no side), the action renamed where it names a side, and a take
     of its own (``<take>~mirrored``)."""
-    root = np.asarray(clip.root) * np.array([-1.0, 1.0, 1.0], dtype=np.float32)
+    motion = C.mirrored(clip.motion)
     content = MIRRORED_CONTENT.get(clip.content, clip.content) if clip.content else None
     return replace(
         clip,
         name=f"{clip.name}~mirrored",
         take=f"{clip.take}~mirrored",
-        lrot=C.mirror_rotations(clip.lrot).astype(np.float32),
-        root=root.astype(np.float32),
+        lrot=motion.lrot.astype(np.float32),
+        root=motion.lpos[:, 1].astype(np.float32),  # the hips carry the travel
         content=content,
     )
 
