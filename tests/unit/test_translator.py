@@ -149,6 +149,9 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
         T.main(args + ["--resume", "--content-bottleneck", "8"])
     with pytest.raises(SystemExit):
         T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
+    fresh = ["--checkpoint", str(tmp_path / "wide.pt")]  # a fresh run's bottleneck is checked
+    with pytest.raises(ValueError, match="content_bottleneck 500 must be 0"):
+        T.main(args + fresh + ["--content-bottleneck", "500"])
     # a run whose validation reconstruction drifts past diverged_factor x its best stops
     # and leaves the last checkpoint as it was (a factor under 1 trips at the first check)
     before = ckpt.read_bytes()

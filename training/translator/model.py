@@ -60,8 +60,8 @@ class ModelConfig:
             raise ValueError(f"down-sampling exceeds STRIDE={STRIDE}")
         if not 0 <= self.content_bottleneck <= self.content_channels[-1]:
             raise ValueError(
-                f"content_bottleneck {self.content_bottleneck} must be 0 (none) or narrower "
-                f"than the content code's {self.content_channels[-1]} channels"
+                f"content_bottleneck {self.content_bottleneck} must be 0 (none) or at most "
+                f"the content code's {self.content_channels[-1]} channels"
             )
 
     def to_dict(self) -> dict:

@@ -910,8 +910,8 @@ def train(
             )
     model_cfg = model_cfg or ModelConfig()
     model_cfg.keep_amplitude |= keep_amplitude
-    if bottleneck and ckpt is None:
-        model_cfg.content_bottleneck = bottleneck
+    if bottleneck and ckpt is None:  # replace, not assign: the config checks the width
+        model_cfg = dataclasses.replace(model_cfg, content_bottleneck=bottleneck)
     model_cfg.num_styles = len(prep.styles)
     if cfg.w_content_adv > 0 and not model_cfg.num_contents:
         model_cfg.num_contents = len(prep.contents)
