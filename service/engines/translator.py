@@ -113,9 +113,10 @@ def pad_mirrored(x: np.ndarray, total: int) -> tuple[np.ndarray, int]:
     return np.pad(x, ((before, extra - before), (0, 0)), mode="symmetric"), before
 
 
-def window_starts(frames: int, window: int = WINDOW, hop: int = WINDOW_HOP) -> list[int]:
+def window_starts(frames: int, window: int = WINDOW, hop: int | None = None) -> list[int]:
     """Starts of the windows covering ``frames`` frames (``frames >= window``): every
-    ``hop`` frames, the last one flush with the end."""
+    ``hop`` frames (half a window unless given), the last one flush with the end."""
+    hop = hop or window // 2
     starts = list(range(0, frames - window + 1, hop))
     if starts[-1] != frames - window:
         starts.append(frames - window)
@@ -201,8 +202,7 @@ class TranslatorEngine(Engine):
         offset = 0
         if len(x) < length:
             x, offset = pad_mirrored(x, length)
-        starts = window_starts(len(x), length, length // 2)
-        windows = np.stack([x[s : s + length] for s in starts])
+        windows = np.stack([x[s : s + length] for s in window_starts(len(x), length)])
         windows = np.ascontiguousarray(windows.transpose(0, 2, 1), dtype=np.float32)
         return windows, offset, len(x)
 
@@ -214,7 +214,7 @@ class TranslatorEngine(Engine):
         weight = np.hanning(length + 2)[1:-1, None]
         total = np.zeros((frames, 1))
         out = np.zeros((frames, windows.shape[1]))
-        for window, start in zip(windows, window_starts(frames, length, length // 2), strict=True):
+        for window, start in zip(windows, window_starts(frames, length), strict=True):
             out[start : start + length] += weight * window.T
             total[start : start + length] += weight
         return (out / total).astype(np.float32)
