@@ -82,16 +82,23 @@ def test_health_answers_while_inference_runs_and_concurrency_is_bounded(make_cli
     threads = [threading.Thread(target=call) for _ in range(3)]
     for thread in threads:
         thread.start()
-    assert work.started.acquire(timeout=5)  # one is running, the others wait for the thread
+    try:
+        assert work.started.acquire(timeout=5)  # one is running, the others wait for the thread
+        # the other two requests reach the runner on their own threads, in their own time
+        runner = client.app.state.runner
+        deadline = time.perf_counter() + 5
+        while runner.in_flight < 3 and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert runner.in_flight == 3
 
-    started = time.perf_counter()
-    assert client.get("/healthz").status_code == 200
-    assert client.get("/readyz").status_code == 200
-    assert time.perf_counter() - started < 1.0
-    assert client.app.state.runner.in_flight == 3
-
-    work.release.set()
-    for thread in threads:
-        thread.join(timeout=10)
+        started = time.perf_counter()
+        assert client.get("/healthz").status_code == 200
+        assert client.get("/readyz").status_code == 200
+        assert time.perf_counter() - started < 1.0
+        assert runner.in_flight == 3  # nobody finished while health answered
+    finally:  # a failure above must not leave three requests blocked for the next tests
+        work.release.set()
+        for thread in threads:
+            thread.join(timeout=10)
     assert results == [200, 200, 200]
     assert work.peak == 1
