@@ -147,15 +147,25 @@ def test_smoke_training_writes_a_resumable_checkpoint(tmp_path, monkeypatch):
     assert torch.load(ckpt, map_location="cpu", weights_only=False)["step"] == 33
     with pytest.raises(SystemExit, match="already has a bottleneck"):
         T.main(args + ["--resume", "--content-bottleneck", "8"])
+    # mixed kernels join a trained decoder, and the mixed model goes on with its optimizer
+    T.main(args + ["--resume", "--style-kernels", "2"])
+    mixed = torch.load(ckpt, map_location="cpu", weights_only=False)
+    assert mixed["step"] == 36 and mixed["model_config"]["style_kernels"] == 2
+    assert mixed["generator"]["decoder.res.0.conv1.weight"].shape[0] == 2 * 160
+    assert mixed["generator"]["decoder.mix.weight"].shape == (3 * 2 * 2, 128)
+    T.main(args + ["--resume"])
+    assert torch.load(ckpt, map_location="cpu", weights_only=False)["step"] == 39
     with pytest.raises(SystemExit):
         T.main(args + ["--grow-decoder", "1"])  # a fresh run takes its size from the config
     fresh = ["--checkpoint", str(tmp_path / "wide.pt")]  # a fresh run's bottleneck is checked
     with pytest.raises(ValueError, match="content_bottleneck 500 must be 0"):
         T.main(args + fresh + ["--content-bottleneck", "500"])
+    with pytest.raises(ValueError, match="style_kernels 1 must be"):
+        T.main(args + fresh + ["--style-kernels", "1"])
     # a run whose validation reconstruction drifts past diverged_factor x its best stops
     # and leaves the last checkpoint as it was (a factor under 1 trips at the first check)
     before = ckpt.read_bytes()
-    with pytest.raises(SystemExit, match="diverged at step 36: validation rec_pos_cm"):
+    with pytest.raises(SystemExit, match="diverged at step 42: validation rec_pos_cm"):
         T.main(args + ["--resume", "--diverged-factor", "0.5"])
     assert ckpt.read_bytes() == before
 
@@ -304,6 +314,51 @@ def test_narrowed_content_code_starts_as_its_principal_projection():
     f.load_state_dict(full["generator"])
     with torch.no_grad():
         torch.testing.assert_close(f.content_encoder(x), z, atol=1e-4, rtol=1e-4)
+
+
+def test_mixed_kernels_start_as_the_old_decoder_then_part():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, content_channels=[16, 24])
+    cfg.style_channels, cfg.style_dim, cfg.mlp_hidden = [16, 16, 16], 8, 12
+    g = M.Translator(cfg)
+    content = torch.randn(3, Fe.CONTENT_CHANNELS, 32)
+    style = torch.randn(3, Fe.STYLE3D_CHANNELS, 32)
+    opt = torch.optim.Adam(g.parameters(), lr=1e-3)
+    for _ in range(2):  # Adam moments for every old parameter
+        opt.zero_grad()
+        g(content, style).square().mean().backward()
+        opt.step()
+    ckpt = {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+
+    mixed = T.mix_kernels(ckpt, 3)
+    h = M.Translator(M.ModelConfig(**mixed["model_config"]))
+    h.load_state_dict(mixed["generator"])
+    with torch.no_grad():
+        torch.testing.assert_close(h(content, style), g(content, style), atol=1e-5, rtol=1e-5)
+    kernels = h.decoder.res[0].conv1.weight.detach().unflatten(0, (3, 24))
+    old = g.decoder.res[0].conv1.weight.detach()
+    assert not torch.equal(kernels[0], kernels[1])  # perturbed apart...
+    torch.testing.assert_close(kernels.mean(0), old, atol=1e-6, rtol=1e-6)  # ...about the old one
+    params = dict(h.named_parameters())
+    opt_h = torch.optim.Adam(params.values(), lr=1e-3)
+    opt_h.load_state_dict(mixed["opt_g"])
+    moments = opt_h.state[params["decoder.res.0.conv1.weight"]]["exp_avg_sq"]
+    old_moments = opt.state[dict(g.named_parameters())["decoder.res.0.conv1.weight"]]
+    assert torch.equal(moments.unflatten(0, (3, 24))[2], old_moments["exp_avg_sq"])
+    assert params["decoder.mix.weight"] not in opt_h.state
+    # after a step the clips no longer mix evenly, and differently from each other
+    opt_h.zero_grad()
+    h(content, style).square().mean().backward()
+    opt_h.step()
+    with torch.no_grad():
+        logits = h.decoder.mix(h.style3d(style))
+    assert float(logits.std(dim=0).max()) > 0
+    with pytest.raises(SystemExit, match="already mixes"):
+        T.mix_kernels(mixed, 2)
+    with pytest.raises(ValueError, match="style_kernels 1"):
+        M.ModelConfig(style_kernels=1)
 
 
 def random_batch(batch: int, frames: int, styles: list[int]):

@@ -20,7 +20,12 @@ from motion import bvh, retarget  # noqa: E402
 from motion import features as Fe  # noqa: E402
 from service.manifest import load_manifest, verify_files  # noqa: E402
 from tests.rigs import FIXTURE  # noqa: E402
-from training.translator.model import AMPLITUDE_PARAMETERS, ModelConfig, Translator  # noqa: E402
+from training.translator.model import (  # noqa: E402
+    AMPLITUDE_PARAMETERS,
+    MIX_GAIN,
+    ModelConfig,
+    Translator,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -80,6 +85,19 @@ def test_parity_with_kept_amplitudes(tmp_path):
         for name, p in g.named_parameters():
             if name.endswith(AMPLITUDE_PARAMETERS):
                 p.normal_(0.0, 0.5)
+    paths = X.export_graphs(g, tmp_path)
+    figures = X.parity(g, paths)  # raises outside rtol 1e-4 / atol 5e-5
+    assert all(fig["max_abs"] < X.ATOL for fig in figures.values()), figures
+
+
+def test_parity_with_style_mixed_kernels(tmp_path):
+    torch.manual_seed(2)
+    g = Translator(dataclasses.replace(tiny_config(), style_kernels=3)).eval()
+    with torch.no_grad():  # trained-looking: clips mix their kernels unevenly
+        g.decoder.mix.weight.normal_(0.0, 0.1)
+        style = torch.randn(2, g.decoder.mix.in_features)
+        mix = torch.softmax(MIX_GAIN * g.decoder.mix(style), dim=-1)
+    assert float((mix - 1 / 3).abs().max()) > 0.1  # the mix matters to what is compared
     paths = X.export_graphs(g, tmp_path)
     figures = X.parity(g, paths)  # raises outside rtol 1e-4 / atol 5e-5
     assert all(fig["max_abs"] < X.ATOL for fig in figures.values()), figures

@@ -46,6 +46,10 @@ class ModelConfig:
     # > 0: the content code passes through this many channels (a linear squeeze and
     # unsqueeze), the paper's restricted content dimensionality against copying the style
     content_bottleneck: int = 0
+    # > 1: each decoder residual convolution is a mix of this many kernels, weighted per
+    # clip by the style code, so style can act on timing and shape, not only on AdaIN's
+    # per-channel scale and shift (CondConv-style)
+    style_kernels: int = 0
 
     @property
     def content_down(self) -> int:
@@ -58,6 +62,8 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if 2 ** max(self.content_down, self.style_down, len(self.disc_channels) - 1) > STRIDE:
             raise ValueError(f"down-sampling exceeds STRIDE={STRIDE}")
+        if self.style_kernels < 0 or self.style_kernels == 1:
+            raise ValueError(f"style_kernels {self.style_kernels} must be 0 (none) or at least 2")
         if not 0 <= self.content_bottleneck <= self.content_channels[-1]:
             raise ValueError(
                 f"content_bottleneck {self.content_bottleneck} must be 0 (none) or at most "
@@ -85,6 +91,10 @@ NORM_EPS = 1e-5  # F.instance_norm's
 AMPLITUDE_FRAMES = 32  # about a second at 30 fps: the span a kept amplitude is measured over
 MAX_LOG_AMPLITUDE = 3.0  # a span's amplitude counts up to e**3 times its channel's usual one
 AMPLITUDE_PARAMETERS = (".keep", ".log_ref")  # the names' endings of what keep_amplitude adds
+# the kernel mix's logits are its linear layer's output times this: Adam moves weights by
+# about the learning rate whatever their scale, and at the rates that fine-tune a trained
+# model (~4e-5) unscaled logits would take ~10^5 steps to mix at all
+MIX_GAIN = 25.0
 
 
 class Norm(nn.Module):
@@ -145,23 +155,51 @@ class ResBlock(nn.Module):
         return x + self.norm2(self.conv2(h))
 
 
+class MixedConv(nn.Conv1d):
+    """``kernels`` same-length convolutions in one, their outputs mixed per clip:
+    ``sum_k mix[:, k] * conv_k(x)`` (a mix of kernels is the convolution by the mixed
+    kernel). One convolution with ``kernels * channels`` outputs exports as plain ONNX."""
+
+    def __init__(self, channels: int, kernel: int, kernels: int) -> None:
+        super().__init__(channels, kernels * channels, kernel, padding=kernel // 2)
+        self.kernels, self.channels = kernels, channels
+
+    def forward(self, x: torch.Tensor, mix: torch.Tensor) -> torch.Tensor:
+        y = super().forward(x).unflatten(1, (self.kernels, self.channels))
+        return (y * mix[:, :, None, None]).sum(dim=1)
+
+
 class AdaResBlock(nn.Module):
-    """Two convolutions with AdaIN and a skip (decoder); ``params (B, 4 * C)``."""
+    """Two convolutions with AdaIN and a skip (decoder); ``params (B, 4 * C)``. With
+    ``kernels`` > 1 each convolution is a :class:`MixedConv`, ``mix (B, 2, kernels)``."""
 
     def __init__(
-        self, channels: int, kernel: int, keep_amplitude: bool = False, level: int = 0
+        self,
+        channels: int,
+        kernel: int,
+        keep_amplitude: bool = False,
+        level: int = 0,
+        kernels: int = 0,
     ) -> None:
         super().__init__()
         self.channels = channels
-        self.conv1 = conv(channels, channels, kernel)
-        self.conv2 = conv(channels, channels, kernel)
+        self.conv1 = (
+            MixedConv(channels, kernel, kernels) if kernels else conv(channels, channels, kernel)
+        )
+        self.conv2 = (
+            MixedConv(channels, kernel, kernels) if kernels else conv(channels, channels, kernel)
+        )
         self.norm1 = Norm(channels, keep_amplitude, level)
         self.norm2 = Norm(channels, keep_amplitude, level)
 
-    def forward(self, x: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, params: torch.Tensor, mix: torch.Tensor | None = None
+    ) -> torch.Tensor:
         s1, b1, s2, b2 = params.split(self.channels, dim=1)
-        h = F.leaky_relu(adain(self.norm1(self.conv1(x)), 1.0 + s1, b1), 0.2)
-        return x + adain(self.norm2(self.conv2(h)), 1.0 + s2, b2)
+        h1 = self.conv1(x) if mix is None else self.conv1(x, mix[:, 0])
+        h = F.leaky_relu(adain(self.norm1(h1), 1.0 + s1, b1), 0.2)
+        h2 = self.conv2(h) if mix is None else self.conv2(h, mix[:, 1])
+        return x + adain(self.norm2(h2), 1.0 + s2, b2)
 
 
 class ContentEncoder(nn.Module):
@@ -234,9 +272,16 @@ class Decoder(nn.Module):
         super().__init__()
         chans = cfg.content_channels[::-1]
         self.res = nn.ModuleList(
-            AdaResBlock(chans[0], cfg.kernel, cfg.keep_amplitude, cfg.content_down)
+            AdaResBlock(
+                chans[0], cfg.kernel, cfg.keep_amplitude, cfg.content_down, cfg.style_kernels
+            )
             for _ in range(cfg.decoder_resblocks)
         )
+        self.kernels = cfg.style_kernels
+        if self.kernels:  # zero logits: every clip starts with an even mix
+            self.mix = nn.Linear(cfg.style_dim, cfg.decoder_resblocks * 2 * self.kernels)
+            nn.init.zeros_(self.mix.weight)
+            nn.init.zeros_(self.mix.bias)
         self.up = nn.ModuleList(
             conv(a, b, cfg.kernel) for a, b in zip(chans[:-1], chans[1:], strict=True)
         )
@@ -256,9 +301,13 @@ class Decoder(nn.Module):
 
     def forward(self, content: torch.Tensor, style: torch.Tensor) -> torch.Tensor:
         params = self.mlp(style).split(self.param_sizes, dim=1)
+        mixes: list[torch.Tensor | None] = [None] * len(self.res)
+        if self.kernels:
+            logits = (MIX_GAIN * self.mix(style)).unflatten(1, (len(self.res), 2, self.kernels))
+            mixes = list(torch.softmax(logits, dim=-1).unbind(1))
         h = content
-        for block, p in zip(self.res, params, strict=False):
-            h = block(h, p)
+        for block, p, mix in zip(self.res, params, mixes, strict=False):
+            h = block(h, p, mix)
         for layer, norm, p in zip(self.up, self.up_norms, params[len(self.res) :], strict=True):
             h = F.interpolate(h, scale_factor=2.0, mode="nearest")
             scale, shift = p.split(p.shape[1] // 2, dim=1)

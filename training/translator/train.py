@@ -98,6 +98,7 @@ from training.translator.model import (
     AMPLITUDE_PARAMETERS,
     STRIDE,
     Discriminator,
+    MixedConv,
     ModelConfig,
     Translator,
     calibrate_amplitude,
@@ -801,6 +802,45 @@ def grow_decoder(ckpt: dict, extra: int) -> dict:
     }
 
 
+def mix_kernels(ckpt: dict, kernels: int, spread: float = 0.05, seed: int = 0) -> dict:
+    """``ckpt`` with each decoder residual convolution turned into a mix of ``kernels``
+    kernels (:class:`MixedConv`), each the old kernel plus its own small perturbation
+    (``spread`` times the kernel's spread) that sums to zero over the kernels. Mixing
+    logits start at zero, so the generator translates exactly as before; the
+    perturbations make the mix's gradient non-zero, so the kernels can part. Adam's
+    moments of an old kernel are repeated for each of its copies."""
+    old_cfg = ModelConfig(**ckpt["model_config"])
+    if old_cfg.style_kernels:
+        raise SystemExit("the checkpoint's decoder already mixes kernels")
+    new_cfg = dataclasses.replace(old_cfg, style_kernels=kernels)
+    old_g, new_g = Translator(old_cfg), Translator(new_cfg)
+    old_g.load_state_dict(ckpt["generator"])
+    gen = torch.Generator().manual_seed(seed)
+    state = new_g.state_dict()
+    mixed = {n for n, m in new_g.named_modules() if isinstance(m, MixedConv)}
+    for name, value in ckpt["generator"].items():
+        module, _, kind = name.rpartition(".")
+        if module not in mixed:
+            state[name] = value
+            continue
+        noise = torch.randn((kernels, *value.shape), generator=gen)
+        noise = (noise - noise.mean(dim=0)) * spread * value.std()
+        state[name] = (value.unsqueeze(0) + noise).flatten(0, 1)
+    new_g.load_state_dict(state)
+
+    def repeat_moments(name: str, m: dict) -> dict:
+        if name.rpartition(".")[0] in mixed:
+            m["exp_avg"] = m["exp_avg"].repeat(kernels, *[1] * (m["exp_avg"].dim() - 1))
+            m["exp_avg_sq"] = m["exp_avg_sq"].repeat(kernels, *[1] * (m["exp_avg_sq"].dim() - 1))
+        return m
+
+    return ckpt | {
+        "model_config": new_cfg.to_dict(),
+        "generator": new_g.state_dict(),
+        "opt_g": _moved_adam(ckpt["opt_g"], old_g, new_g, repeat_moments),
+    }
+
+
 def _moved_adam(opt: dict, old_g: Translator, new_g: Translator, adjust=None) -> dict:
     """``opt_g``'s state for ``new_g``: each old parameter's Adam moments follow it to its
     new place (``adjust(name, moments)`` may reshape them); new parameters start with none."""
@@ -885,18 +925,22 @@ def train(
     keep_amplitude: bool = False,
     grow: int = 0,
     bottleneck: int = 0,
+    style_kernels: int = 0,
 ) -> dict:
     """Train (or go on training) until ``cfg.steps``, or ``max_steps`` more steps.
     ``keep_amplitude`` turns :class:`Norm`'s kept amplitude on, for a resumed model too;
     ``grow`` adds that many decoder blocks to a resumed model (:func:`grow_decoder`);
     ``bottleneck`` squeezes the content code through that many channels, a resumed model's
-    by :func:`narrow_content`."""
+    by :func:`narrow_content`; ``style_kernels`` mixes that many kernels in each decoder
+    residual convolution, a resumed model's by :func:`mix_kernels`."""
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False) if resume else None
     if ckpt is not None:
         ckpt = grow_decoder(ckpt, grow)
+        if style_kernels:
+            ckpt = mix_kernels(ckpt, style_kernels)
         model_cfg = ModelConfig(**ckpt["model_config"])
     prep = prepare(cfg, ckpt["val_takes"] if ckpt else None)
     if ckpt is not None:
@@ -910,8 +954,12 @@ def train(
             )
     model_cfg = model_cfg or ModelConfig()
     model_cfg.keep_amplitude |= keep_amplitude
-    if bottleneck and ckpt is None:  # replace, not assign: the config checks the width
-        model_cfg = dataclasses.replace(model_cfg, content_bottleneck=bottleneck)
+    if ckpt is None:  # replace, not assign: the config checks the values
+        model_cfg = dataclasses.replace(
+            model_cfg,
+            content_bottleneck=bottleneck or model_cfg.content_bottleneck,
+            style_kernels=style_kernels or model_cfg.style_kernels,
+        )
     model_cfg.num_styles = len(prep.styles)
     if cfg.w_content_adv > 0 and not model_cfg.num_contents:
         model_cfg.num_contents = len(prep.contents)
@@ -1173,6 +1221,13 @@ def main(argv: list[str] | None = None) -> None:
         help="squeeze the content code through this many channels (a resumed model's "
         "starts as the projection onto its codes' top principal components)",
     )
+    parser.add_argument(
+        "--style-kernels",
+        type=int,
+        default=0,
+        help="mix this many kernels, weighted by the style code, in each decoder residual "
+        "convolution (a resumed model's start as copies of its kernels, translating as before)",
+    )
     args = parser.parse_args(argv)
     if args.grow_decoder and not args.resume:
         parser.error("--grow-decoder needs --resume (a fresh model takes its size from the config)")
@@ -1218,4 +1273,5 @@ def main(argv: list[str] | None = None) -> None:
         args.keep_amplitude,
         args.grow_decoder,
         args.content_bottleneck,
+        args.style_kernels,
     )
