@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 from pathlib import Path
 
@@ -21,6 +22,8 @@ from service.engines.translator import (
     MAX_WARP,
     MIN_WARP,
     OUTPUT_SMOOTHING,
+    SAME_STYLE_FAR,
+    SAME_STYLE_NEAR,
     WINDOW,
     WINDOW_HOP,
     InvalidStyle,
@@ -122,6 +125,31 @@ def warped_frames(frames: int, factor: float) -> int:
     return round((frames - 1) / factor) + 1
 
 
+def speeds() -> dict[str, float]:
+    return {name: info["speed"] for name, info in ENTRY["extra"]["styles"].items()}
+
+
+def style_gap() -> float:
+    codes = np.array([ENTRY["extra"]["styles"][name]["code"] for name in STYLES])
+    gaps = np.linalg.norm(codes[:, None] - codes[None], axis=-1)
+    return float(gaps[~np.eye(len(codes), dtype=bool)].min())
+
+
+def nearest_style(client, clip: bytes) -> dict:
+    """The named style nearest ``clip``'s own code, and its distance (/v1/style-code)."""
+    response = client.post("/v1/style-code", files={"style": ("c.bvh", clip, "text/plain")})
+    assert response.status_code == 200, response.text
+    return response.json()["nearest"][0]
+
+
+def own_speed(client, clip: bytes) -> float:
+    """The speed of the named style ``clip`` is in (1 in none), by the engine's rule."""
+    nearest = nearest_style(client, clip)
+    near, far = SAME_STYLE_NEAR * style_gap(), SAME_STYLE_FAR * style_gap()
+    weight = min(max((far - nearest["distance"]) / (far - near), 0.0), 1.0)
+    return speeds()[nearest["style"]] ** weight
+
+
 # --------------------------------------------------------------------------- engine helpers
 
 
@@ -208,7 +236,7 @@ def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(share
     source = bvh.loads(walk)
     name = "old" if "old" in STYLES else STYLES[0]
     out = assert_transfer_ok(transfer(shared_client, walk, style_name=name), walk)
-    factor = ENTRY["extra"]["styles"][name]["speed"]  # a named style warps by its speed
+    factor = speeds()[name] / own_speed(shared_client, walk)  # a named style's relative speed
     assert out.num_frames == warped_frames(source.num_frames, factor)
     # joints with no canonical counterpart follow the warped original
     rig = retarget.make_rig(source.skeleton, source)
@@ -221,22 +249,46 @@ def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(share
 
 @needs_model
 def test_named_styles_warp_by_speed_whatever_the_content(shared_client, walk):
-    """A slow style slows a run and a bow alike, and a mix warps by the weighted geometric
-    mean of its speeds (the mean velocity factor of a style's clips would slow every run
-    and speed up every bow: it mixes contents)."""
-    speeds = {name: info["speed"] for name, info in ENTRY["extra"]["styles"].items()}
-    slow, fast = min(speeds, key=speeds.get), max(speeds, key=speeds.get)
-    assert speeds[slow] < 0.9 and speeds[fast] > 1.1
+    """A slow style slows a run and a bow alike, relative to the style each is in, and a mix
+    warps by the weighted geometric mean of its speeds (the mean velocity factor of a
+    style's clips would slow every run and speed up every bow: it mixes contents)."""
+    speed = speeds()
+    slow, fast = min(speed, key=speed.get), max(speed, key=speed.get)
+    assert speed[slow] < 0.9 and speed[fast] > 1.1
     for clip in ("dataset-1_run_normal_001", "dataset-1_bow_normal_001"):
         content = bandai(clip)
-        frames = bvh.loads(content).num_frames
+        frames, own = bvh.loads(content).num_frames, own_speed(shared_client, content)
         for name in (slow, fast):
             out = assert_transfer_ok(transfer(shared_client, content, style_name=name), content)
-            assert out.num_frames == warped_frames(frames, speeds[name]), (clip, name)
+            factor = min(max(speed[name] / own, MIN_WARP), MAX_WARP)
+            assert out.num_frames == warped_frames(frames, factor), (clip, name)
     mix = {slow: 0.25, fast: 0.75}
     out = transfer(shared_client, walk, style_mix=json.dumps(mix), strength="0.5")
-    factor = (speeds[slow] ** 0.25 * speeds[fast] ** 0.75) ** 0.5
+    factor = (speed[slow] ** 0.25 * speed[fast] ** 0.75 / own_speed(shared_client, walk)) ** 0.5
     assert_transfer_ok(out, walk, frames=warped_frames(bvh.loads(walk).num_frames, factor))
+
+
+@needs_model
+def test_a_clip_restyled_to_the_named_style_it_is_in_keeps_its_timing(shared_client):
+    """A not-confident walk (the slowest style) restyled "not-confident" is not slowed
+    further, nor a masculinity walk sped up; to another style it warps by the ratio of the
+    two styles' speeds."""
+    speed = speeds()
+    for clip, style in [
+        ("dataset-1_walk_not-confident_002", "not-confident"),
+        ("dataset-1_walk_masculinity_002", "masculinity"),
+    ]:
+        content = bandai(clip)
+        nearest = nearest_style(shared_client, content)
+        assert nearest["style"] == style and nearest["distance"] < SAME_STYLE_NEAR * style_gap()
+        assert abs(math.log(speed[style])) > 0.2  # alone, its speed would warp it visibly
+        frames = bvh.loads(content).num_frames
+        out = assert_transfer_ok(transfer(shared_client, content, style_name=style), content)
+        assert out.num_frames == frames, clip
+        other = "normal"
+        out = assert_transfer_ok(transfer(shared_client, content, style_name=other), content)
+        factor = min(max(speed[other] / speed[style], MIN_WARP), MAX_WARP)
+        assert out.num_frames == warped_frames(frames, factor) != frames, clip
 
 
 @needs_model
