@@ -183,12 +183,15 @@ class AdaResBlock(nn.Module):
     ) -> None:
         super().__init__()
         self.channels = channels
-        self.conv1 = (
-            MixedConv(channels, kernel, kernels) if kernels else conv(channels, channels, kernel)
-        )
-        self.conv2 = (
-            MixedConv(channels, kernel, kernels) if kernels else conv(channels, channels, kernel)
-        )
+
+        def make_conv() -> nn.Conv1d:
+            return (
+                MixedConv(channels, kernel, kernels)
+                if kernels
+                else conv(channels, channels, kernel)
+            )
+
+        self.conv1, self.conv2 = make_conv(), make_conv()
         self.norm1 = Norm(channels, keep_amplitude, level)
         self.norm2 = Norm(channels, keep_amplitude, level)
 
