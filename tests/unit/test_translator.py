@@ -193,6 +193,15 @@ def test_kept_amplitude_starts_as_instance_norm_and_can_hand_on_a_spans_amplitud
     assert not any(m.calibrating for m in g.modules() if isinstance(m, M.Norm))
 
 
+def _checkpoint_with_adam_moments(g, cfg, opt, content, style) -> dict:
+    """A checkpoint of ``g`` whose optimiser holds Adam moments for every parameter."""
+    for _ in range(2):
+        opt.zero_grad()
+        g(content, style).square().mean().backward()
+        opt.step()
+    return {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+
+
 def test_grown_decoder_translates_as_before_then_learns_with_the_old_moments():
     from training.translator import train as T
 
@@ -207,11 +216,7 @@ def test_grown_decoder_translates_as_before_then_learns_with_the_old_moments():
     params = dict(g.named_parameters())
     opt = torch.optim.Adam([params[n] for n in names[0]], lr=1e-3)
     opt.add_param_group({"params": [params[n] for n in names[1]], "lr_scale": 30.0})
-    for _ in range(2):  # Adam moments for every old parameter
-        opt.zero_grad()
-        g(content, style).square().mean().backward()
-        opt.step()
-    ckpt = {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+    ckpt = _checkpoint_with_adam_moments(g, cfg, opt, content, style)
 
     grown = T.grow_decoder(ckpt, 2)
     assert grown["model_config"]["decoder_resblocks"] == cfg.decoder_resblocks + 2
@@ -326,11 +331,7 @@ def test_mixed_kernels_start_as_the_old_decoder_then_part():
     content = torch.randn(3, Fe.CONTENT_CHANNELS, 32)
     style = torch.randn(3, Fe.STYLE3D_CHANNELS, 32)
     opt = torch.optim.Adam(g.parameters(), lr=1e-3)
-    for _ in range(2):  # Adam moments for every old parameter
-        opt.zero_grad()
-        g(content, style).square().mean().backward()
-        opt.step()
-    ckpt = {"model_config": cfg.to_dict(), "generator": g.state_dict(), "opt_g": opt.state_dict()}
+    ckpt = _checkpoint_with_adam_moments(g, cfg, opt, content, style)
 
     mixed = T.mix_kernels(ckpt, 3)
     h = M.Translator(M.ModelConfig(**mixed["model_config"]))
