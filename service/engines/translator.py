@@ -13,8 +13,9 @@ padded rather than refused; the style codes of the named styles were computed th
 A transfer (paper section 3.4): encode the content; style code = own + strength x (target -
 own), own being the content's 3D style code (strength 0 gives the content back, as the
 network reconstructs it); decode; the content's root trajectory (``features.decode_motion``);
-feet pinned where the CONTENT's feet are planted (``ik.pin_canonical_feet``, before the time
-warp, as the paper does); then the time warp, to the power ``strength`` and clamped to
+the hips raised or lowered so that the feet planted where the CONTENT's are stand on the
+content's floor, then held there (``ik.pin_canonical_feet``, before the time warp, as the
+paper does); then the time warp, to the power ``strength`` and clamped to
 [``MIN_WARP``, ``MAX_WARP``]: for a style clip the paper's ratio of velocity factors (style
 over content); for a named style or mix the style's speed against the other styles on the
 same content (``model_export.translator.style_speeds``), over the speed of the named style
@@ -392,7 +393,8 @@ class TranslatorEngine(Engine):
             motion = Fe.decode_motion(output, content, face=enc.facing)
         if foot_cleanup:
             with timer.stage("foot_cleanup"):
-                motion = ik.pin_canonical_feet(motion, CT.canonical_foot_contacts(content))
+                contacts = CT.canonical_foot_contacts(content)
+                motion = ik.pin_canonical_feet(motion, contacts, floor_of=content)
         warnings: list[str] = []
         factor = 1.0
         if time_warp:

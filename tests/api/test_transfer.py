@@ -291,6 +291,35 @@ def test_a_clip_restyled_to_the_named_style_it_is_in_keeps_its_timing(shared_cli
         assert out.num_frames == warped_frames(frames, factor) != frames, clip
 
 
+def _lowest_foot_level(motion) -> float:
+    """The lowest planted height of a clip's feet and toes, in body heights."""
+    from motion import contacts as CT
+
+    names = motion.skeleton.names
+    feet = [j for j, n in enumerate(names) if "foot" in n.lower() or "toe" in n.lower()]
+    gpos = K.global_positions(motion)
+    height = float(np.median(np.ptp(gpos[..., 1], axis=1)))
+    return float(CT.ground_heights(gpos, feet).min()) / height
+
+
+@needs_model
+@pytest.mark.parametrize(
+    ("clip", "style", "tolerance"),
+    [
+        (None, "proud", 0.03),  # the repository's CMU walk: 6% of its height under, before
+        (None, "elderly", 0.03),  # 4.5% before
+        (("xia", "neutral_16_000.bvh"), "happy", 0.1),  # 27% (46 cm) before
+    ],
+)
+def test_a_transfer_stands_on_the_contents_floor(shared_client, walk, clip, style, tolerance):
+    """The decoder's legs may be straighter than the content's under the content's hips
+    height; the hips move so that the planted feet do not sink into the content's floor."""
+    content = walk if clip is None else data_path(*clip).read_bytes()
+    out = assert_transfer_ok(transfer(shared_client, content, style_name=style), content)
+    sunk = _lowest_foot_level(bvh.loads(content)) - _lowest_foot_level(out)
+    assert sunk < tolerance, f"feet {sunk:.1%} of the body's height under the floor"
+
+
 @needs_model
 def test_without_time_warp_the_frame_count_is_the_contents(shared_client, walk):
     response = transfer(shared_client, walk, style_name=STYLES[0], time_warp="false")

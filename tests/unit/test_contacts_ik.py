@@ -13,6 +13,7 @@ from motion import rotations as rot
 from motion.errors import MotionError
 from motion.skeleton import Motion
 from tests.conftest import data_path
+from tests.rigs import FIXTURE
 
 WALK = ("bandai", "dataset-1", "dataset-1_walk_normal_001.bvh")
 CMU_WALK = ("cmu-31", "07_01.bvh")
@@ -371,6 +372,74 @@ def test_pin_feet_without_contacts_changes_nothing(walk):
     np.testing.assert_array_equal(out.lrot, walk.lrot)
     with pytest.raises(MotionError):
         ik.pin_canonical_feet(walk, none[:, :3])
+
+
+@pytest.fixture(scope="module")
+def fixture_walk() -> Motion:
+    """The repository's own CMU walk on the canonical skeleton (no shared data needed)."""
+    return retarget.to_canonical(bvh.load(FIXTURE))
+
+
+def _foot_levels(motion: Motion) -> np.ndarray:
+    gpos = K.global_positions(motion)
+    return CT.ground_heights(gpos, CT.CANONICAL_FOOT_JOINTS, C.leg_length())
+
+
+def _hips_raised(motion: Motion, by: np.ndarray | float) -> Motion:
+    lpos = motion.lpos.copy()
+    lpos[:, C.INDEX["Hips"], 1] += by
+    return motion.replace(lpos=lpos)
+
+
+@pytest.mark.parametrize("by", [-12.0, 8.0])  # feet sunk into the floor, feet floating
+def test_ground_hips_puts_planted_feet_back_on_the_floor(fixture_walk, by):
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    hips = C.INDEX["Hips"]
+    moved = _hips_raised(fixture_walk, by)
+    grounded = ik.ground_hips(moved, contacts, levels, hips)
+    # the error is removed whole: the same result as from the clip itself...
+    settled = ik.ground_hips(fixture_walk, contacts, levels, hips)
+    np.testing.assert_allclose(grounded.lpos, settled.lpos, atol=1e-6)
+    np.testing.assert_array_equal(grounded.lrot, moved.lrot)  # only the hips' height moves
+    # ...which stands where it stood, to within the heights its planted feet vary by
+    np.testing.assert_allclose(_foot_levels(grounded), _foot_levels(fixture_walk), atol=1.5)
+    assert np.abs(settled.lpos[:, hips, 1] - fixture_walk.lpos[:, hips, 1]).max() < 2.5  # cm
+
+
+def test_ground_hips_follows_a_slow_crouch(fixture_walk):
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    hips = C.INDEX["Hips"]
+    crouch = np.linspace(0.0, -15.0, fixture_walk.num_frames)  # legs 15 cm too long by the end
+    grounded = ik.ground_hips(_hips_raised(fixture_walk, crouch), contacts, levels, hips)
+    settled = ik.ground_hips(fixture_walk, contacts, levels, hips)
+    error = np.abs(grounded.lpos[:, hips, 1] - settled.lpos[:, hips, 1])
+    middle = slice(len(error) // 4, -len(error) // 4)
+    assert error[middle].max() < 0.75 and error.max() < 2.5  # cm, against 15 uncorrected
+    none = np.zeros_like(contacts)
+    np.testing.assert_array_equal(
+        ik.ground_hips(fixture_walk, none, levels, hips).lpos, fixture_walk.lpos
+    )
+    with pytest.raises(MotionError, match="contacts must be"):
+        ik.ground_hips(fixture_walk, contacts[:, :3], levels, hips)
+
+
+def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
+    """A decoder's straighter legs under the content's hips height sink the feet; pinned on
+    the content's floor they stand on it again, and still hold still."""
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    sunk = _hips_raised(fixture_walk, -10.0)
+    own = ik.pin_canonical_feet(sunk, contacts)
+    grounded = ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk)
+    assert (_foot_levels(own) - _foot_levels(fixture_walk)).mean() < -8.0
+    np.testing.assert_allclose(_foot_levels(grounded), _foot_levels(fixture_walk), atol=1.0)
+    assert (
+        CT.canonical_foot_skating(grounded, contacts)
+        <= CT.canonical_foot_skating(own, contacts) + 0.1
+    )
+    with pytest.raises(MotionError, match="frames"):
+        ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
 
 
 # --------------------------------------------------------------------------- fit_positions
