@@ -458,7 +458,7 @@ def ground_hips(
     ``contacts (F, len(levels))`` in that order). ``hips`` must hang from a root that
     only turns about the vertical, as the canonical Hips does. Frames with no contact
     take their neighbours' shift. (Holding the lowest joint, not the mean of them,
-    sank the toes less and read 1.5 points more in the target style.)
+    sank the toes less and read 1.4 points more in the target style.)
 
     A decoder given the content's hips height may straighten or bend the legs (its
     style, or the habits of the skeletons it learned on): on one Xia walk that sank the
