@@ -461,9 +461,9 @@ def ground_hips(
     sank the toes less and read 1.4 points more in the target style.)
 
     A decoder given the content's hips height may straighten or bend the legs (its
-    style, or the habits of the skeletons it learned on): on one Xia walk that sank the
-    toes 33 cm into the floor, and leg IK cannot lift them out without bending the knees
-    the style straightened."""
+    style, or the habits of the skeletons it learned on): on one Xia walk that put the
+    toes 27 cm under the floor, and leg IK cannot lift them out without bending the
+    knees the style straightened."""
     contacts = np.asarray(contacts, dtype=bool)
     feet = list(levels)
     if contacts.shape != (motion.num_frames, len(feet)):

@@ -62,7 +62,7 @@ OUTPUT_SMOOTHING = 2.0
 CODE_NORM_LIMIT = 1.25
 # A clip is in a named style when its own style code lies within SAME_STYLE_NEAR x the
 # smallest distance between two named codes of that style's code; beyond SAME_STYLE_FAR x it
-# in none (fading between), and a named target's speed then stands alone. On 0.1.71412
+# is in none (fading between), and a named target's speed then stands alone. On 0.1.71412
 # (smallest distance 6.75) the 51 held-out Bandai takes lie 0.9-4.2 from their nearest
 # named code (median 1.9), which is their own style for all 26 within 2.0 and for 44 of the
 # 51; the 9 CMU clips of ../shared/data/cmu-31 lie 3.5-6.0 from theirs (normal or proud).
