@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from motion import bvh, retarget
+from motion import contacts as CT
 from motion import features as Fe
 from motion import kinematics as K
 from service.config import Settings
@@ -293,8 +294,6 @@ def test_a_clip_restyled_to_the_named_style_it_is_in_keeps_its_timing(shared_cli
 
 def _lowest_foot_level(motion) -> float:
     """The lowest planted height of a clip's feet and toes, in body heights."""
-    from motion import contacts as CT
-
     names = motion.skeleton.names
     feet = [j for j, n in enumerate(names) if "foot" in n.lower() or "toe" in n.lower()]
     gpos = K.global_positions(motion)

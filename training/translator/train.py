@@ -830,8 +830,8 @@ def mix_kernels(ckpt: dict, kernels: int, spread: float = 0.05, seed: int = 0) -
 
     def repeat_moments(name: str, m: dict) -> dict:
         if name.rpartition(".")[0] in mixed:
-            m["exp_avg"] = m["exp_avg"].repeat(kernels, *[1] * (m["exp_avg"].dim() - 1))
-            m["exp_avg_sq"] = m["exp_avg_sq"].repeat(kernels, *[1] * (m["exp_avg_sq"].dim() - 1))
+            for key in ("exp_avg", "exp_avg_sq"):
+                m[key] = m[key].repeat(kernels, *[1] * (m[key].dim() - 1))
         return m
 
     return ckpt | {
