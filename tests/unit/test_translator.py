@@ -521,6 +521,78 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)
 
 
+def stepping_feet(frames: int = 32) -> torch.Tensor:
+    """Root-local positions ``(1, frames, 21, 3)``: a body 1 leg length up whose feet take
+    turns, each foot joint at its ground level (ankle 0.08, toes 0.02) when planted and
+    0.15 higher when not."""
+    from training.translator import train as T
+
+    pos = torch.linspace(-0.5, 0.5, 21 * 3).reshape(1, 1, 21, 3).repeat(1, frames, 1, 1)
+    pos[..., 1] += 1.0
+    left_up = (torch.arange(frames) // 8) % 2 == 1
+    for k, j in enumerate(T._FEET):  # Foot_L, Toes_L, Foot_R, Toes_R
+        up = left_up if k < 2 else ~left_up
+        pos[0, :, j, 1] = (0.08 if k % 2 == 0 else 0.02) + 0.15 * up
+    return pos
+
+
+@pytest.mark.parametrize("sink", [-0.12, 0.07])
+def test_ground_translation_stands_a_sunk_or_floating_body_on_the_contents_floor(sink):
+    from training.translator import train as T
+
+    content = stepping_feet()
+    translation = content.clone()
+    translation[..., 1] += sink
+    translation.requires_grad_()
+    grounded = T.ground_translation(content, translation, 15.0)
+    assert torch.allclose(grounded, content, atol=1e-5)  # only the height moved, back
+    grounded.sum().backward()  # the shift follows the translation's feet: no detach
+    assert torch.isfinite(translation.grad).all()
+
+
+def test_ground_translation_leaves_out_a_foot_held_up_all_window():
+    from training.translator import train as T
+
+    content = stepping_feet()
+    content[0, :, T._FEET[:2], 1] += 0.5  # the left foot never comes down
+    content[0, :, T._FEET[2:], 1] = torch.tensor([0.08, 0.02])  # the right stays planted
+    translation = content.clone()
+    translation[0, :, T._FEET[:2], 1] = -0.3  # the held-up foot dips: not a ground contact
+    assert torch.equal(T.ground_translation(content, translation, 15.0), translation)
+    translation[..., 1] -= 0.1  # the planted foot sinks with the body: lifted back
+    expected = translation.clone()
+    expected[..., 1] += 0.1
+    assert torch.allclose(T.ground_translation(content, translation, 15.0), expected, atol=1e-5)
+
+
+def test_translations_are_grounded_for_the_discriminator_only_when_asked():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    stats = identity_stats()
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
+    m.positions[:] = stepping_feet().repeat(2, 1, 1, 1)
+    runs = {}
+    for ground in (False, True):
+        losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(ground_translations=ground))
+        with torch.no_grad():
+            torch.manual_seed(1)
+            runs[ground] = losses.generator(m, n, x)
+    fake_in = runs[False][2]
+    fake = fake_in[:, Fe.STYLE3D_CHANNELS :]
+    plain = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig()).positions(fake, m.hips_height)
+    grounded = T.ground_translation(m.positions, plain, 15.0)
+    assert not torch.allclose(grounded, plain, atol=1e-3)  # a random decoder floats or sinks
+    flat = grounded.reshape(grounded.shape[:2] + (-1,)).transpose(1, 2)
+    stand = T.Standardizer(stats).style3d.standardize(flat)
+    assert torch.allclose(runs[True][2][:, : Fe.STYLE3D_CHANNELS], stand, atol=1e-5)
+    assert torch.equal(runs[True][2][:, Fe.STYLE3D_CHANNELS :], fake)  # rotations untouched
+    # reconstruction is still judged at the content's own hips height
+    assert runs[True][1]["rec_pos_cm"] == runs[False][1]["rec_pos_cm"]
+
+
 def test_content_heads_judge_translations_by_the_content_windows_label():
     from training.translator import train as T
 

@@ -90,6 +90,7 @@ import torch
 import torch.nn.functional as F
 
 from motion import canonical as C
+from motion import contacts as Ct
 from motion import features as Fe
 from training import data as D
 from training.fk import RootLocalFK
@@ -153,6 +154,10 @@ class TrainConfig:
     w_style_cls: float = 0.0
     # the content code must not tell a linear probe more of m's style than its content label
     w_content_style: float = 0.0
+    # translations stand on the content's floor, as the service grounds them
+    # (:func:`ground_translation`), not at the content's hips height
+    ground_translations: bool = False
+    grounding_frames: float = 15.0  # Gaussian sigma of the hips' shift (the service's 0.5 s)
     probe_lr: float = 1e-3
     content_head_lr_scale: float = 10.0  # a head added to a trained discriminator catches up
     amplitude_lr_scale: float = 10.0  # the same for what keep_amplitude adds to a generator
@@ -286,6 +291,42 @@ def to_batch(w: TD.Windows, norm: Standardizer) -> Batch:
 # --------------------------------------------------------------------------- losses
 
 
+_FEET = [j - 1 for j in Ct.CANONICAL_FOOT_JOINTS]  # body joints: joint_Root left out
+
+
+def ground_translation(
+    content: torch.Tensor, translation: torch.Tensor, sigma_frames: float
+) -> torch.Tensor:
+    """``translation`` raised or lowered, slowly, so that the lowest of its foot joints
+    that the content plants stands on the content's ground level of that joint: the
+    torch twin of ``motion.ik.ground_hips``, which the service applies after decoding.
+    Root-local positions ``(B, T, 21, 3)`` in leg lengths. Contacts here are by height
+    alone (within ``HEIGHT_FRACTION`` of the joint's lowest in the window): root-local
+    positions carry no horizontal speed. A foot the content holds up through the whole
+    window is left out, as the service's ground levels leave it out. Without it the discriminator judged translations at the content's hips
+    height, legs sunk into the floor or floating, which no inference output shows."""
+    feet = content[..., _FEET, 1]
+    level = feet.amin(dim=1, keepdim=True)
+    level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
+    planted = feet - level < Ct.HEIGHT_FRACTION
+    gap = level - translation[..., _FEET, 1]
+    lowest = torch.where(planted, gap, torch.full_like(gap, -torch.inf)).amax(dim=-1)
+    held = planted.any(dim=-1)
+    weight = held.to(translation.dtype)
+    lowest = torch.where(held, lowest, torch.zeros_like(lowest))
+    # Gaussian smoothing of the held frames' shifts, normalised by the held weight, so
+    # frames without contact take their neighbours' shift (the service interpolates)
+    radius = max(1, int(math.ceil(3 * sigma_frames)))
+    t = torch.arange(-radius, radius + 1, dtype=translation.dtype)
+    kernel = torch.exp(-0.5 * (t / sigma_frames) ** 2)[None, None]
+    num = F.conv1d((lowest * weight)[:, None], kernel, padding=radius)[:, 0]
+    den = F.conv1d(weight[:, None], kernel, padding=radius)[:, 0]
+    shift = torch.where(den > 1e-6, num / den.clamp_min(1e-6), torch.zeros_like(den))
+    up = torch.zeros(3, dtype=translation.dtype)
+    up[1] = 1.0
+    return translation + shift[..., None, None] * up
+
+
 _HANDS = [C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1]  # body joints: joint_Root left out
 _HEAD = C.INDEX["Head"] - 1
 
@@ -390,6 +431,14 @@ class Losses:
         raw = self.norm.output.unstandardize(output).transpose(1, 2)
         return self.fk(raw.reshape(raw.shape[:2] + (-1, 6)), hips_height)
 
+    def translated_positions(self, output: torch.Tensor, m: Batch) -> torch.Tensor:
+        """Positions of a translation of content ``m``, grounded on m's floor if the run
+        asks for it."""
+        pos = self.positions(output, m.hips_height)
+        if self.cfg.ground_translations:
+            pos = ground_translation(m.positions, pos, self.cfg.grounding_frames)
+        return pos
+
     def disc_input(self, output: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
         flat = positions.reshape(positions.shape[:2] + (-1,)).transpose(1, 2)
         return torch.cat([self.norm.style3d.standardize(flat), output], dim=1)
@@ -441,7 +490,7 @@ class Losses:
         rec_pos = F.l1_loss(self.positions(rec, m.hips_height), m.positions)
 
         fake = self.g.decoder(z_content, code_x)
-        fake_pos = self.positions(fake, m.hips_height)
+        fake_pos = self.translated_positions(fake, m)
         fake_in = self.disc_input(fake, fake_pos)
         scores, feats = self.d(fake_in)
         adv = -self.pick(scores, x.style).mean()
@@ -466,7 +515,7 @@ class Losses:
             if wild is fake:
                 wild_pos = fake_pos
             else:  # the discriminator's content heads learn from it as a fake
-                wild_pos = self.positions(wild, m.hips_height)
+                wild_pos = self.translated_positions(wild, m)
                 wild_in = self.disc_input(wild, wild_pos)
         if cfg.w_cycle > 0:
             root = m.content[:, Fe.OUTPUT_CHANNELS :]
