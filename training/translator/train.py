@@ -303,8 +303,9 @@ def ground_translation(
     Root-local positions ``(B, T, 21, 3)`` in leg lengths. Contacts here are by height
     alone (within ``HEIGHT_FRACTION`` of the joint's lowest in the window): root-local
     positions carry no horizontal speed. A foot the content holds up through the whole
-    window is left out, as the service's ground levels leave it out. Without it the discriminator judged translations at the content's hips
-    height, legs sunk into the floor or floating, which no inference output shows."""
+    window is left out, as the service's ground levels leave it out. Without it the
+    discriminator judged translations at the content's hips height, legs sunk into the
+    floor or floating, which no inference output shows."""
     feet = content[..., _FEET, 1]
     level = feet.amin(dim=1, keepdim=True)
     level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
