@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
 def record_in_manifest(report: dict, models_dir: Path) -> None:
     """The report's summary figures into its model's manifest entry (refused for another
     version of the model; a new export drops them)."""
-    from model_export.manifest import put_evaluation
+    from model_export.manifest import measuring_machine, put_evaluation
 
     figures = {
         "songs": len(report["songs"]),
@@ -244,6 +244,7 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "genre_accuracy": report["genre_accuracy"],
         "ten_minutes": report["ten_minutes"],
         "measured": time.strftime("%Y-%m-%d"),
+        "machine": measuring_machine(),
         "by": "python -m training.eval_dance (beat alignment: AIST++ score; foot sliding in "
         "cm/s; genre: logistic regression on real training-song dances)",
     }

@@ -897,7 +897,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def record_in_manifest(report: dict, models_dir: Path) -> None:
     """The report's table (rows, takes, date) into its model's entry in ``models_dir``."""
-    from model_export.manifest import put_evaluation
+    from model_export.manifest import measuring_machine, put_evaluation
 
     figures = {
         "held_out_takes": report["held_out_takes"],
@@ -905,6 +905,7 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "rows": report["rows"],
         "gaps": report.get("gaps"),
         "measured": time.strftime("%Y-%m-%d"),
+        "machine": measuring_machine(),
         "by": "python -m training.eval_style (style, content_conv: convolutional classifiers; "
         "content_all_takes: the same trained on the training takes too, in folds by take; "
         "style_linear, content: logistic regression; foot skating in cm/s; hand reach: cm "

@@ -74,6 +74,7 @@ def test_style_evaluation_records_its_table(models):
     (model,) = load_manifest(models).models
     figures = model.metrics["evaluation"]["translator_held_out_takes"]
     assert figures["rows"] == rows and figures["held_out_takes"] == 51
+    assert "cores; BLAS kernels:" in figures["machine"]  # figures differ by CPU
     with pytest.raises(ValueError, match="not '2'"):
         ES.record_in_manifest(report | {"model_version": "2"}, models)
 
@@ -94,5 +95,6 @@ def test_dance_evaluation_records_its_summary(models):
     figures = model.metrics["evaluation"]["held_out_songs"]
     assert figures["songs"] == 2 and figures["beat_alignment"]["generated"]["bas"] == 0.55
     assert figures["ten_minutes"]["frames"] == 18000
+    assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
         ED.record_in_manifest(report | {"model_version": "2"}, models)
