@@ -442,6 +442,35 @@ def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
         ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
 
 
+def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
+    """A floor 6 cm over the walk's toe level: every toe in the air within 6 cm of the real
+    floor dips under it. The ankles turn the dipping toes up onto it; nothing else moves."""
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    toes = contacts[:, [1, 3]]
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk) + 6.0, strict=True))
+    lifted = ik.lift_toes(fixture_walk, levels, toes, ik.CANONICAL_LEGS)
+    before, after = K.global_positions(fixture_walk), K.global_positions(lifted)
+    toe_joints = [C.INDEX["Toes_L"], C.INDEX["Toes_R"]]
+    others = [j for j in range(len(C.JOINTS)) if j not in toe_joints]
+    np.testing.assert_allclose(after[:, others], before[:, others], atol=1e-6)  # ankles too
+    for i, (_, _, ankle, toe) in enumerate(ik.CANONICAL_LEGS):
+        np.testing.assert_allclose(  # the foot keeps its length
+            np.linalg.norm(after[:, toe] - after[:, ankle], axis=-1),
+            np.linalg.norm(before[:, toe] - before[:, ankle], axis=-1),
+            rtol=1e-6,
+        )
+        assert (after[:, toe, 1] >= before[:, toe, 1] - 1e-6).all()  # never pushed down
+        dip = np.clip(levels[toe] - before[:, toe, 1], 0, None) * ~toes[:, i]
+        left = np.clip(levels[toe] - after[:, toe, 1], 0, None) * ~toes[:, i]
+        assert dip.sum() > 20.0  # cm over the clip: the case is real
+        assert left.sum() < 0.05 * dip.sum()  # smoothed, so the edges of a dip keep a little
+    nothing = {j: level - 50.0 for j, level in levels.items()}
+    same = ik.lift_toes(fixture_walk, nothing, toes, ik.CANONICAL_LEGS)
+    np.testing.assert_array_equal(same.lrot, fixture_walk.lrot)
+    with pytest.raises(MotionError, match="toe contacts"):
+        ik.lift_toes(fixture_walk, levels, toes[1:], ik.CANONICAL_LEGS)
+
+
 # --------------------------------------------------------------------------- fit_positions
 
 
