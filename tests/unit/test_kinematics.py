@@ -134,6 +134,33 @@ def test_resample_count_hits_exact_frame_count():
     np.testing.assert_allclose(held.lpos[-1], m.lpos[-1], atol=1e-9)
 
 
+def test_quaternion_product_and_rotation_match_scipy_and_broadcast():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(1)
+    a = rot.normalize(rng.normal(size=(7, 1, 4)))
+    b = rot.normalize(rng.normal(size=(5, 4)))
+    v = rng.normal(size=(5, 3))
+    product = rot.mul(a, b)
+    turned = rot.apply(a, v)
+    assert product.shape == (7, 5, 4) and turned.shape == (7, 5, 3)
+    want = Rotation.from_quat(np.broadcast_to(a, (7, 5, 4)).reshape(-1, 4)) * Rotation.from_quat(
+        np.broadcast_to(b, (7, 5, 4)).reshape(-1, 4)
+    )
+    got = product.reshape(-1, 4)
+    np.testing.assert_allclose(np.abs(np.sum(got * want.as_quat(), -1)), 1.0, atol=1e-12)
+    np.testing.assert_allclose(
+        turned.reshape(-1, 3),
+        Rotation.from_quat(np.broadcast_to(a, (7, 5, 4)).reshape(-1, 4)).apply(
+            np.broadcast_to(v, (7, 5, 3)).reshape(-1, 3)
+        ),
+        atol=1e-12,
+    )
+    # one quaternion and one vector, as lists
+    np.testing.assert_allclose(rot.apply([0.0, 0.0, 0.0, 1.0], [1, 2, 3]), [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(rot.mul(b[0].tolist(), [0.0, 0.0, 0.0, 1.0]), b[0])
+
+
 def test_slerp_and_6d_round_trip():
     rng = np.random.default_rng(0)
     q = rot.normalize(rng.normal(size=(100, 4)))
