@@ -2,7 +2,7 @@
 networks): style and content recognition of their outputs, and foot skating.
 
     python -m training.eval_style translator|fast|all [--json PATH] [--limit N] [--no-mirror]
-        [--classifier-cache DIR] [--manifest]
+        [--classifier-cache DIR] [--manifest] [--strength S]
 
 For a family, the held-out takes are the Bandai takes its training never saw (its bundle's
 ``split.json``): 51 takes for the translator, 73 for the fast networks, too few for a
@@ -411,15 +411,22 @@ def style_names(family: str, engine) -> list[str]:
     return sorted(engine.style_info)
 
 
-def transfer(family: str, engine, canon: Motion, style: str) -> Motion:
-    """``canon`` in ``style`` through the shipped engine, as the service runs it."""
+def transfer(family: str, engine, canon: Motion, style: str, strength: float = 1.0) -> Motion:
+    """``canon`` in ``style`` through the shipped engine, as the service runs it; the
+    translator at ``strength`` (the API's ``strength``, 1 by default)."""
     from service.metrics import StageTimer
 
     if family == "translator":
         target = engine.code_of_name(style)
         return engine.transfer(
-            canon, target.code, style_velocity=target.velocity, style_speed=target.speed
+            canon,
+            target.code,
+            strength=strength,
+            style_velocity=target.velocity,
+            style_speed=target.speed,
         ).motion
+    if strength != 1.0:
+        raise ValueError(f"the {family} family has no strength: only 1.0, got {strength}")
     return engine.stylize(canon, style, StageTimer(engine.name))
 
 
@@ -621,11 +628,15 @@ def evaluate(
     log=print,
     mirror: bool = True,
     classifier_cache: Path | None = None,
+    strength: float = 1.0,
 ) -> dict:
     """The report of ``family`` on the held-out takes of ``takes_of`` (default its own);
     ``classifier_cache``: a folder keeping the trained classifiers (see
-    :func:`classifiers_for`)."""
+    :func:`classifiers_for`); ``strength``: the translator's transfers at that strength."""
     from training.data import load_bandai
+
+    if not 0.0 <= strength <= 1.0 or (family != "translator" and strength != 1.0):
+        raise ValueError(f"strength {strength}: the translator takes 0 to 1, the others 1 only")
 
     engine, entry, _ = load_engine(family)
     takes_of = takes_of or family
@@ -690,7 +701,7 @@ def evaluate(
             rows["unchanged"].add(
                 judge(x.take, second, fold), s, x.content, source, x.style, x.take
             )
-            out = verdict(transfer(family, engine, second, s), fold)
+            out = verdict(transfer(family, engine, second, s, strength), fold)
             rows[family].add(out, s, x.content, source, x.style, x.take)
             per_style[s].add(out, s, x.content, source, x.style, x.take)
             actions = "hand actions" if raises_a_hand(x.content) else "other actions"
@@ -718,6 +729,7 @@ def evaluate(
         "model": f"{entry.name} {entry.version}",
         "model_name": entry.name,
         "model_version": entry.version,
+        "strength": strength,
         "held_out_takes": len(test),
         "takes_of": takes_of,
         "takes_unseen_by_family": sum(x.take in own for x in test),
@@ -793,7 +805,12 @@ def markdown(report: dict) -> str:
         f"from the {report['takes_of']}'s training ({report['takes_unseen_by_family']} unseen "
         f"by the {report['family']}) x {report['styles']} styles; chance: style "
         f"{report['chance_style']:.0%}, "
-        f"content {report['chance_content']:.0%}",
+        f"content {report['chance_content']:.0%}"
+        + (
+            f"; transfers at strength {report['strength']:g}"
+            if report.get("strength", 1.0) != 1.0
+            else ""
+        ),
         "",
         "| output | n | style accuracy | style accuracy (linear) | style read as the content's "
         "| content accuracy | content accuracy (conv) | content accuracy (all takes) "
@@ -872,12 +889,24 @@ def main(argv: list[str] | None = None) -> int:
         help="also record each report's figures in the model's manifest entry "
         "(metrics.evaluation.<takes>_held_out_takes), so they travel with the model",
     )
+    p.add_argument(
+        "--strength",
+        type=float,
+        default=1.0,
+        help="the translator's transfers at this strength, 0 to 1 (the API's; default 1)",
+    )
     args = p.parse_args(argv)
+    if not 0.0 <= args.strength <= 1.0:
+        p.error(f"--strength must be within 0 and 1, got {args.strength}")
+    if args.strength != 1.0 and args.family != "translator":
+        p.error("--strength is the translator's: only `translator` takes it")
+    if args.strength != 1.0 and args.manifest:
+        p.error("--manifest records the figures at full strength, as the API's default")
     families = FAMILIES if args.family == "all" else (args.family,)
     reports = [
         evaluate(
             f, args.takes, args.limit, mirror=not args.no_mirror,
-            classifier_cache=args.classifier_cache,
+            classifier_cache=args.classifier_cache, strength=args.strength,
         )
         for f in families
     ]  # fmt: skip

@@ -316,3 +316,25 @@ def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypa
     assert "| translator |" in ES.markdown(report)
     recorded = recorded_evaluation(ES.record_in_manifest, report, tmp_path)
     assert recorded["translator_held_out_takes"]["held_out_takes"] == 1
+
+
+def test_transfers_at_a_strength_are_the_apis_and_only_the_translator_takes_one():
+    """``--strength`` judges the translator's transfers as the API makes them at that
+    strength: at 0 every target keeps the content's own style code and is not time-warped."""
+    engine, _, _ = ES.load_engine("translator")
+    canon = retarget.to_canonical(bvh.load(FIXTURE))
+    styles = ES.style_names("translator", engine)[:2]
+    kept = [ES.transfer("translator", engine, canon, s, strength=0.0) for s in styles]
+    full = [ES.transfer("translator", engine, canon, s) for s in styles]
+    assert kept[0].num_frames == kept[1].num_frames == canon.num_frames
+    np.testing.assert_allclose(kept[0].lrot, kept[1].lrot)
+    assert full[0].num_frames != full[1].num_frames or not np.allclose(full[0].lrot, full[1].lrot)
+    with pytest.raises(ValueError, match="strength"):
+        ES.transfer("fast", None, canon, styles[0], strength=0.5)
+    for argv in (
+        ["fast", "--strength", "0.5"],
+        ["translator", "--strength", "1.5"],
+        ["translator", "--strength", "0.5", "--manifest"],
+    ):
+        with pytest.raises(SystemExit):
+            ES.main(argv)
