@@ -47,6 +47,8 @@ def test_a_good_model_is_loaded_warmed_and_listed(make_client, tmp_path):
     assert session.get_providers() == ["CPUExecutionProvider"]
     assert session.get_session_options().intra_op_num_threads == 1
     assert session.get_session_options().inter_op_num_threads == 1
+    spinning = "session.intra_op.allow_spinning"
+    assert session.get_session_options().get_session_config_entry(spinning) == "0"
 
     models = client.get("/v1/models").json()["models"]
     assert models[0]["name"] == "tiny" and models[0]["loaded"] is True
@@ -194,3 +196,19 @@ def test_register_engine(make_client, tmp_path):
             del ENGINE_FACTORIES["dance"]
         else:
             ENGINE_FACTORIES["dance"] = previous
+
+
+def test_only_the_graphs_an_engine_names_busy_wait_between_runs(make_client, tmp_path):
+    """Spinning threads take a core from the numpy work after a run; the dance rollout's
+    step graph, run once per frame, keeps them."""
+
+    class SpinningEngine(StyledEngine):
+        spinning_graphs = frozenset({"net"})
+
+    write_tiny_model(tmp_path)
+    spinning = "session.intra_op.allow_spinning"
+    for engines, want in ((NO_ENGINES, "0"), ({"fast": SpinningEngine}, "1")):
+        client = make_client(settings_for(tmp_path), engines)
+        assert client.get("/readyz").status_code == 200
+        session = client.app.state.registry.get("tiny").sessions["net"]
+        assert session.get_session_options().get_session_config_entry(spinning) == want
