@@ -519,6 +519,18 @@ def test_raised_hands_term_is_logged_only_when_weighted():
         rel=1e-5,
     )  # no w_cycle or w_raised_hands: no translation to r is made
     assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)
+    # the foot-pitch term likewise, on a content whose feet take turns on the floor
+    m.positions[:, :, T._FEET, 1] = stepping_feet()[0, :, T._FEET, 1]
+    feet = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_foot_pitch=1.0))
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total_off, logs_off, *_ = off.generator(m, n, x, r=r)
+        torch.manual_seed(1)
+        total_feet, logs_feet, *_ = feet.generator(m, n, x, r=r)
+    want = float(T.feet_pitched(m.positions, fake_pos))
+    assert logs_off["foot_pitch_cm"] == 0.0 and want > 0.0
+    assert logs_feet["foot_pitch_cm"] == pytest.approx(want * Fe.LEG, rel=1e-5)
+    assert float(total_feet - total_off) == pytest.approx(want, rel=1e-4)
 
 
 def stepping_feet(frames: int = 32) -> torch.Tensor:
@@ -760,3 +772,25 @@ def test_mirror_adds_each_training_clip_the_other_way_round_and_leaves_validatio
     plain_x = np.concatenate([c.style3d for c in plain.train])[:, lateral].mean(axis=0)
     middle = [i for i, j in enumerate(C.MIRROR_INDEX[1:]) if j == i + 1]
     assert np.abs(mean_x[middle]).max() < 1e-3 < np.abs(plain_x[middle]).max()
+
+
+def test_feet_pitched_compares_flat_planted_feet_only():
+    from training.translator import train as T
+
+    content = stepping_feet()  # planted: ankle 0.08, toes 0.02 (rise -0.06); up: both +0.15
+    translation = content.clone()
+    translation[..., 1] += 0.3  # a vertical shift changes no pitch
+    assert float(T.feet_pitched(content, translation)) == pytest.approx(0.0, abs=1e-6)
+    toe_l, toe_r = T._FEET[1], T._FEET[3]
+    left_up = (torch.arange(32) // 8) % 2 == 1
+    translation[0, :, toe_l, 1] -= 0.04  # the left toe pitched down, planted or not
+    translation[0, ~left_up, toe_r, 1] -= 1.0  # the right toe while its foot is in the air
+    # the left foot is planted in 16 of 32 frames, the right in the other 16: errors of
+    # 0.04 over the left's 16 planted frames, averaged with the right's 16 at 0
+    assert float(T.feet_pitched(content, translation)) == pytest.approx(0.02, abs=1e-6)
+    translation.requires_grad_()
+    T.feet_pitched(content, translation).backward()
+    assert translation.grad[0, :, toe_l, 1].abs().sum() > 0
+    held_up = content.clone()
+    held_up[0, :, T._FEET[:2], 1] += 0.5  # the left foot never comes down: never compared
+    assert float(T.feet_pitched(held_up, translation.detach())) == pytest.approx(0.0, abs=1e-6)

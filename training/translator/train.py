@@ -31,6 +31,10 @@ One step, for a batch of B content windows ``m`` (style s):
   classifier took raises for waves.
 - with ``w_hand_speed``: the same for each hand's mean speed (``hand_speed_changed``; not
   in the paper): a wave keeps the hand moving where a raise holds it.
+- with ``w_foot_pitch``: where m has a foot flat on the floor (heel and toe planted), the
+  translations to x (and r) pitch it as m does (``feet_pitched``; not in the paper): the
+  decoder pitched feet toe-down, so planted toes sank under the content's floor and the
+  clean-up could not hold them on it without swing toes skimming it.
 - with ``w_content_adv``: the discriminator also has a head per content label (``walk``,
   ``raise-up-left-hand``...), trained like the style heads on real windows of that label
   (any style) against translations of content windows with that label (to x, and to r);
@@ -150,6 +154,8 @@ class TrainConfig:
     hand_speed_ratio: float = 1.5
     # the discriminator's content heads judge whether a translation performs m's label
     w_content_adv: float = 0.0
+    # a foot the content window has flat on the floor is pitched as in the content
+    w_foot_pitch: float = 0.0
     # the style heads also classify: real windows by their style, the translation to x as x's
     w_style_cls: float = 0.0
     # the content code must not tell a linear probe more of m's style than its content label
@@ -306,10 +312,9 @@ def ground_translation(
     window is left out, as the service's ground levels leave it out. Without it the
     discriminator judged translations at the content's hips height, legs sunk into the
     floor or floating, which no inference output shows."""
-    feet = content[..., _FEET, 1]
-    level = feet.amin(dim=1, keepdim=True)
+    level = content[..., _FEET, 1].amin(dim=1, keepdim=True)
     level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
-    planted = feet - level < Ct.HEIGHT_FRACTION
+    planted = _planted(content)
     gap = level - translation[..., _FEET, 1]
     lowest = torch.where(planted, gap, torch.full_like(gap, -torch.inf)).amax(dim=-1)
     held = planted.any(dim=-1)
@@ -326,6 +331,30 @@ def ground_translation(
     up = torch.zeros(3, dtype=translation.dtype)
     up[1] = 1.0
     return translation + shift[..., None, None] * up
+
+
+def _planted(content: torch.Tensor) -> torch.Tensor:
+    """Which foot joints (:data:`_FEET`) the content plants ``(B, T, 4)``, by height alone,
+    as :func:`ground_translation` finds them."""
+    feet = content[..., _FEET, 1]
+    level = feet.amin(dim=1, keepdim=True)
+    level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
+    return feet - level < Ct.HEIGHT_FRACTION
+
+
+def feet_pitched(content: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
+    """Mean difference of the ankle-to-toe rise between translation and content over the
+    frames where the content has that foot flat (heel and toe planted), in leg lengths (0
+    where it never has). Root-local positions ``(B, T, 21, 3)``."""
+    flat = _planted(content)
+    flat = flat[..., 0::2] & flat[..., 1::2]  # (B, T, 2): each foot's ankle and toe
+
+    def rise(p: torch.Tensor) -> torch.Tensor:
+        y = p[..., _FEET, 1]
+        return y[..., 1::2] - y[..., 0::2]
+
+    error = (rise(translation) - rise(content)).abs()
+    return (error * flat).sum() / flat.sum().clamp_min(1)
 
 
 _HANDS = [C.INDEX["Hand_L"] - 1, C.INDEX["Hand_R"] - 1]  # body joints: joint_Root left out
@@ -505,7 +534,7 @@ class Losses:
         if cfg.w_style_cls > 0:
             style_cls = F.cross_entropy(self.style_logits(scores), x.style)
 
-        cycle, raised, lifted, amplitude, speed = (torch.zeros(()) for _ in range(5))
+        cycle, raised, lifted, amplitude, speed, pitch = (torch.zeros(()) for _ in range(6))
         content_adv = torch.zeros(())
         wild = wild_pos = wild_in = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
@@ -539,6 +568,8 @@ class Losses:
             amplitude = on_translations(hand_amplitude_changed, cfg.hand_amplitude_ratio)
         if cfg.w_hand_speed > 0:
             speed = on_translations(hand_speed_changed, cfg.hand_speed_ratio)
+        if cfg.w_foot_pitch > 0:
+            pitch = on_translations(feet_pitched)
         if cfg.w_content_adv > 0:
             content_adv = -self.hinge_mean(self.pick_content(scores, m.label))
             if wild_in is not None:
@@ -567,6 +598,7 @@ class Losses:
             + cfg.w_lifted_hands * lifted
             + cfg.w_hand_amplitude * amplitude
             + cfg.w_hand_speed * speed
+            + cfg.w_foot_pitch * pitch
             + ramp * cfg.w_content_adv * content_adv
             + ramp * cfg.w_style_cls * style_cls
             + ramp * cfg.w_content_style * content_style
@@ -575,7 +607,7 @@ class Losses:
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG, "adv_g": adv, "feature_match": fm,
             "joint": joint, "triplet": trip, "content_cycle": cycle,
             "raised_hands_cm": raised * Fe.LEG, "lifted_hands_cm": lifted * Fe.LEG,
-            "hand_amplitude": amplitude, "hand_speed": speed,
+            "hand_amplitude": amplitude, "hand_speed": speed, "foot_pitch_cm": pitch * Fe.LEG,
             "content_adv_g": content_adv, "style_cls_g": style_cls,
             "content_style_kl": content_style, "probe_ce": probe_ce, "probe_acc": probe_acc,
             "total_g": total,
