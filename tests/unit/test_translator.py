@@ -496,37 +496,38 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
     m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
     m.positions[..., C.INDEX["Hand_L"] - 1, 1] = 50.0  # the content's left hand, far above
-    off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig())
-    on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_raised_hands=1.0))
-    with torch.no_grad():
-        torch.manual_seed(1)
-        total_off, logs_off, *_ = off.generator(m, n, x, r=r)
-        torch.manual_seed(1)
-        total_on, logs_on, *_ = on.generator(m, n, x, r=r)
+
+    def generate(**weights):
+        """The generator loss with these weights, the same random draws each time."""
+        losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(**weights))
+        with torch.no_grad():
+            torch.manual_seed(1)
+            return losses.generator(m, n, x, r=r)
+
+    total_off, logs_off, *_ = generate()
+    total_on, logs_on, *_ = generate(w_raised_hands=1.0)
     assert logs_off["raised_hands_cm"] == 0.0 and logs_on["raised_hands_cm"] > 0.0
     expected = logs_on["raised_hands_cm"] / Fe.LEG
     assert float(total_on - total_off) == pytest.approx(expected, rel=1e-4, abs=1e-6)
     # the hand-amplitude term judges the translations to x and to r alike
-    amp = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_hand_amplitude=1.0))
+    total_amp, logs_amp, fake_in, _ = generate(w_hand_amplitude=1.0)
+    fake = fake_in[:, Fe.STYLE3D_CHANNELS :]  # the discriminator's input: positions, output
     with torch.no_grad():
-        torch.manual_seed(1)
-        total_amp, logs_amp, fake_in, _ = amp.generator(m, n, x, r=r)
-        fake = fake_in[:, Fe.STYLE3D_CHANNELS :]  # the discriminator's input: positions, output
-        fake_pos = amp.positions(fake, m.hips_height)
+        fake_pos = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig()).positions(
+            fake, m.hips_height
+        )
     assert logs_off["hand_amplitude"] == 0.0 and logs_amp["hand_amplitude"] > 0.0
     assert logs_amp["hand_amplitude"] == pytest.approx(
-        float(T.hand_amplitude_changed(m.positions, fake_pos, amp.cfg.hand_amplitude_ratio)),
+        float(
+            T.hand_amplitude_changed(m.positions, fake_pos, T.TrainConfig().hand_amplitude_ratio)
+        ),
         rel=1e-5,
     )  # no w_cycle or w_raised_hands: no translation to r is made
     assert float(total_amp - total_off) == pytest.approx(logs_amp["hand_amplitude"], rel=1e-4)
     # the foot-pitch term likewise, on a content whose feet take turns on the floor
     m.positions[:, :, T._FEET, 1] = stepping_feet()[0, :, T._FEET, 1]
-    feet = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_foot_pitch=1.0))
-    with torch.no_grad():
-        torch.manual_seed(1)
-        total_off, logs_off, *_ = off.generator(m, n, x, r=r)
-        torch.manual_seed(1)
-        total_feet, logs_feet, *_ = feet.generator(m, n, x, r=r)
+    total_off, logs_off, *_ = generate()
+    total_feet, logs_feet, *_ = generate(w_foot_pitch=1.0)
     want = float(T.feet_pitched(m.positions, fake_pos))
     assert logs_off["foot_pitch_cm"] == 0.0 and want > 0.0
     assert logs_feet["foot_pitch_cm"] == pytest.approx(want * Fe.LEG, rel=1e-5)
