@@ -411,11 +411,21 @@ def style_names(family: str, engine) -> list[str]:
     return sorted(engine.style_info)
 
 
+def check_strength(family: str, strength: float) -> None:
+    """Raise ``ValueError`` unless ``family`` can transfer at ``strength``: the translator
+    from 0 to 1 (the API's ``strength``), the fast networks only at 1 (they have none)."""
+    if family == "translator" and not 0.0 <= strength <= 1.0:
+        raise ValueError(f"strength must be within 0 and 1, got {strength}")
+    if family != "translator" and strength != 1.0:
+        raise ValueError(f"the {family} family has no strength: only 1, got {strength}")
+
+
 def transfer(family: str, engine, canon: Motion, style: str, strength: float = 1.0) -> Motion:
     """``canon`` in ``style`` through the shipped engine, as the service runs it; the
     translator at ``strength`` (the API's ``strength``, 1 by default)."""
     from service.metrics import StageTimer
 
+    check_strength(family, strength)
     if family == "translator":
         target = engine.code_of_name(style)
         return engine.transfer(
@@ -425,8 +435,6 @@ def transfer(family: str, engine, canon: Motion, style: str, strength: float = 1
             style_velocity=target.velocity,
             style_speed=target.speed,
         ).motion
-    if strength != 1.0:
-        raise ValueError(f"the {family} family has no strength: only 1.0, got {strength}")
     return engine.stylize(canon, style, StageTimer(engine.name))
 
 
@@ -635,9 +643,7 @@ def evaluate(
     :func:`classifiers_for`); ``strength``: the translator's transfers at that strength."""
     from training.data import load_bandai
 
-    if not 0.0 <= strength <= 1.0 or (family != "translator" and strength != 1.0):
-        raise ValueError(f"strength {strength}: the translator takes 0 to 1, the others 1 only")
-
+    check_strength(family, strength)
     engine, entry, _ = load_engine(family)
     takes_of = takes_of or family
     held = held_out_takes(takes_of)
@@ -896,13 +902,14 @@ def main(argv: list[str] | None = None) -> int:
         help="the translator's transfers at this strength, 0 to 1 (the API's; default 1)",
     )
     args = p.parse_args(argv)
-    if not 0.0 <= args.strength <= 1.0:
-        p.error(f"--strength must be within 0 and 1, got {args.strength}")
-    if args.strength != 1.0 and args.family != "translator":
-        p.error("--strength is the translator's: only `translator` takes it")
+    families = FAMILIES if args.family == "all" else (args.family,)
+    for f in families:
+        try:
+            check_strength(f, args.strength)
+        except ValueError as e:
+            p.error(f"--strength: {e}")
     if args.strength != 1.0 and args.manifest:
         p.error("--manifest records the figures at full strength, as the API's default")
-    families = FAMILIES if args.family == "all" else (args.family,)
     reports = [
         evaluate(
             f, args.takes, args.limit, mirror=not args.no_mirror,

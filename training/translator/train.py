@@ -312,9 +312,7 @@ def ground_translation(
     window is left out, as the service's ground levels leave it out. Without it the
     discriminator judged translations at the content's hips height, legs sunk into the
     floor or floating, which no inference output shows."""
-    level = content[..., _FEET, 1].amin(dim=1, keepdim=True)
-    level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
-    planted = _planted(content)
+    level, planted = _ground_contacts(content)
     gap = level - translation[..., _FEET, 1]
     lowest = torch.where(planted, gap, torch.full_like(gap, -torch.inf)).amax(dim=-1)
     held = planted.any(dim=-1)
@@ -333,21 +331,21 @@ def ground_translation(
     return translation + shift[..., None, None] * up
 
 
-def _planted(content: torch.Tensor) -> torch.Tensor:
-    """Which foot joints (:data:`_FEET`) the content plants ``(B, T, 4)``, by height alone,
-    as :func:`ground_translation` finds them."""
+def _ground_contacts(content: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each foot joint's (:data:`_FEET`) ground level in the window ``(B, 1, 4)`` and
+    whether the content plants it ``(B, T, 4)``, by height alone."""
     feet = content[..., _FEET, 1]
     level = feet.amin(dim=1, keepdim=True)
     level = torch.minimum(level, level.amin(dim=-1, keepdim=True) + Ct.MAX_GROUND_ELEVATION)
-    return feet - level < Ct.HEIGHT_FRACTION
+    return level, feet - level < Ct.HEIGHT_FRACTION
 
 
 def feet_pitched(content: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
     """Mean difference of the ankle-to-toe rise between translation and content over the
     frames where the content has that foot flat (heel and toe planted), in leg lengths (0
     where it never has). Root-local positions ``(B, T, 21, 3)``."""
-    flat = _planted(content)
-    flat = flat[..., 0::2] & flat[..., 1::2]  # (B, T, 2): each foot's ankle and toe
+    _, planted = _ground_contacts(content)
+    flat = planted[..., 0::2] & planted[..., 1::2]  # (B, T, 2): each foot's ankle and toe
 
     def rise(p: torch.Tensor) -> torch.Tensor:
         y = p[..., _FEET, 1]
