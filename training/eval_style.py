@@ -23,6 +23,13 @@ from the first half of every held-out take:
   content seen in 7-19 styles they recognise about 70% of the real target clips: the
   yardstick of content that does not mistake a new style for a lost action. It departs
   from "classifiers learn from held-out takes only", so the two columns above stay;
+- content (unseen takes): the same networks, the held-out first halves folded by take as
+  well (``content_unseen``), so that every clip is judged by networks that never saw the
+  take its motion comes from: a transfer and its unchanged content clip by those that never
+  saw the content's take, a real target by those that never saw its own. The columns above
+  judge the unchanged clip by networks that learnt its take's first half, so it is read
+  by the performer's manner as much as by the action, which a transfer to another style
+  is meant to change;
 - style (reported as style accuracy): small convolutional networks on 1.6-second windows
   of root-local joint positions, their velocities and the root's motion
   (``ConvClipClassifier``); they recognise real clips of other takes better than the
@@ -452,6 +459,7 @@ class Verdict:
     content: str
     content_conv: str
     content_all: str
+    content_unseen: str
     skating: float
     hand_reach: float
     hands_up: tuple[float, float]
@@ -466,6 +474,7 @@ class Tally:
     content_conv: list[bool] = field(default_factory=list)
     content_all: list[bool] = field(default_factory=list)
     content_all_merged: list[bool] = field(default_factory=list)  # SAME_ACTION merged
+    content_unseen: list[bool] = field(default_factory=list)
     skating: list[float] = field(default_factory=list)
     hand_reach: list[float] = field(default_factory=list)  # only clips of hand actions
     # against the content clip: share of frames a hand is above the head (hand actions
@@ -498,6 +507,7 @@ class Tally:
         self.content_conv.append(verdict.content_conv == content)
         self.content_all.append(verdict.content_all == content)
         self.content_all_merged.append(merged(verdict.content_all) == merged(content))
+        self.content_unseen.append(verdict.content_unseen == content)
         if verdict.content_all != content:
             self.missed[content, verdict.content_all] += 1
         self.skating.append(verdict.skating)
@@ -521,6 +531,7 @@ class Tally:
             "content_accuracy_conv": mean(self.content_conv),
             "content_accuracy_all_takes": mean(self.content_all),
             "content_accuracy_all_takes_merged": mean(self.content_all_merged),
+            "content_accuracy_unseen_takes": mean(self.content_unseen),
             "foot_skating_cm_s": round(skate, 2) if skate is not None else None,
             "hand_actions": len(self.hand_reach),
             "hand_reach_cm": round(reach, 1) if reach is not None else None,
@@ -548,13 +559,14 @@ class Classifiers:
     content: ClipClassifier
     content_conv: ConvClipClassifier
     content_all: FoldedClassifier
+    content_unseen: FoldedClassifier
     style_linear: ClipClassifier
     style_conv: ConvClipClassifier
 
 
 def train_classifiers(held_list: list, training: list, mirror: bool = True) -> Classifiers:
     """Classifiers of the held-out takes' first halves (``content_all``: and of the
-    ``training`` takes, in folds)."""
+    ``training`` takes, in folds; ``content_unseen``: of both, all in folds)."""
     first = [halves(c.motion)[0] for c in held_list]
     train_feats = [window_features(m) for m in first]
     contents = [c.content for c in held_list]
@@ -562,12 +574,17 @@ def train_classifiers(held_list: list, training: list, mirror: bool = True) -> C
     frames = [frame_features(m) for m in first]
     content = ClipClassifier(train_feats, contents)
     content_conv = ConvClipClassifier(frames, contents)
+    training_frames = [frame_features(c.motion) for c in training]
+    training_contents, training_takes = [c.content for c in training], [c.take for c in training]
     content_all = FoldedClassifier(
-        frames,
-        contents,
-        [frame_features(c.motion) for c in training],
-        [c.content for c in training],
-        [c.take for c in training],
+        frames, contents, training_frames, training_contents, training_takes
+    )
+    content_unseen = FoldedClassifier(
+        [],
+        [],
+        frames + training_frames,
+        contents + training_contents,
+        [c.take for c in held_list] + training_takes,
     )
     if mirror:  # a style has no side: the mirror images double the style classifiers' data
         train_feats = train_feats + [window_features(m, mirror=True) for m in first]
@@ -577,6 +594,7 @@ def train_classifiers(held_list: list, training: list, mirror: bool = True) -> C
         content,
         content_conv,
         content_all,
+        content_unseen,
         ClipClassifier(train_feats, styles_of),
         ConvClipClassifier(frames, styles_of),
     )
@@ -660,12 +678,15 @@ def evaluate(
     training = [c for c in clips if c.take not in held]
     clf = classifiers_for(held_list, training, mirror, classifier_cache)
     content_clf, content_conv, content_all = clf.content, clf.content_conv, clf.content_all
+    content_unseen = clf.content_unseen
     style_linear, style_conv = clf.style_linear, clf.style_conv
     log(f"classifiers ready ({time.time() - started:.0f} s)")
     judged: dict[str, Verdict] = {}  # by take; the folded classifier's answer by take and fold
     judged_all: dict[tuple[str, int], str] = {}
 
-    def verdict(motion: Motion, fold: int) -> Verdict:
+    def verdict(motion: Motion, fold: int, take: str) -> Verdict:
+        """``fold``: of ``content_all`` (see below); ``take``: where ``motion`` comes from,
+        whose fold of ``content_unseen`` never saw it."""
         f, per_frame = window_features(motion), frame_features(motion)
         return Verdict(
             style_conv.predict(per_frame),
@@ -673,6 +694,7 @@ def evaluate(
             content_clf.predict(f),
             content_conv.predict(per_frame),
             content_all.predict(per_frame, fold),
+            content_unseen.predict(per_frame, content_unseen.fold_of(take)),
             skating(motion),
             hand_reach(motion),
             hands_up(motion),
@@ -681,7 +703,7 @@ def evaluate(
 
     def judge(take: str, motion: Motion, fold: int) -> Verdict:
         if take not in judged:
-            judged[take] = verdict(motion, fold)
+            judged[take] = verdict(motion, fold, take)
             judged_all[take, fold] = judged[take].content_all
         if (take, fold) not in judged_all:
             judged_all[take, fold] = content_all.predict(frame_features(motion), fold)
@@ -707,7 +729,7 @@ def evaluate(
             rows["unchanged"].add(
                 judge(x.take, second, fold), s, x.content, source, x.style, x.take
             )
-            out = verdict(transfer(family, engine, second, s, strength), fold)
+            out = verdict(transfer(family, engine, second, s, strength), fold, x.take)
             rows[family].add(out, s, x.content, source, x.style, x.take)
             per_style[s].add(out, s, x.content, source, x.style, x.take)
             actions = "hand actions" if raises_a_hand(x.content) else "other actions"
@@ -760,6 +782,9 @@ GAPS = (
      "{f} (pairs with a real target)", "real target", "content_all_merged"),
     ("content (all takes): {f} - unchanged", "{f}", "unchanged", "content_all"),
     ("content (all takes, merged): {f} - unchanged", "{f}", "unchanged", "content_all_merged"),
+    ("content (unseen takes): {f} (pairs) - real target", "{f} (pairs with a real target)",
+     "real target", "content_unseen"),
+    ("content (unseen takes): {f} - unchanged", "{f}", "unchanged", "content_unseen"),
 )  # fmt: skip
 GAP_DRAWS = 2000
 
@@ -820,9 +845,9 @@ def markdown(report: dict) -> str:
         "",
         "| output | n | style accuracy | style accuracy (linear) | style read as the content's "
         "| content accuracy | content accuracy (conv) | content accuracy (all takes) "
-        "| content accuracy (all takes, merged) | foot skating (cm/s) "
-        "| hand reach (cm, n) | hand use error | turning error (deg) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| content accuracy (all takes, merged) | content accuracy (unseen takes) "
+        "| foot skating (cm/s) | hand reach (cm, n) | hand use error | turning error (deg) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in report["rows"].items():
         if not row["n"]:
@@ -831,6 +856,7 @@ def markdown(report: dict) -> str:
         conv = _shown(row, "content_accuracy_conv", ".1%")
         every = _shown(row, "content_accuracy_all_takes", ".1%")
         same = _shown(row, "content_accuracy_all_takes_merged", ".1%")
+        unseen = _shown(row, "content_accuracy_unseen_takes", ".1%")
         reach = _shown(row, "hand_reach_cm", "+.1f")
         reach = reach if reach == "-" else f"{reach} ({row['hand_actions']})"
         use, turn = _shown(row, "hand_use_error", ".1%"), _shown(row, "turning_error_deg", ".1f")
@@ -838,7 +864,7 @@ def markdown(report: dict) -> str:
         lines.append(
             f"| {name} | {row['n']} | {row['style_accuracy']:.1%} | "
             f"{row['style_accuracy_linear']:.1%} | {as_source} | {row['content_accuracy']:.1%} | "
-            f"{conv} | {every} | {same} | {skate} | {reach} | {use} | {turn} |"
+            f"{conv} | {every} | {same} | {unseen} | {skate} | {reach} | {use} | {turn} |"
         )
     shown_gaps = [(k, g) for k, g in report.get("gaps", {}).items() if g]
     if shown_gaps:
@@ -944,6 +970,8 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "machine": measuring_machine(),
         "by": "python -m training.eval_style (style, content_conv: convolutional classifiers; "
         "content_all_takes: the same trained on the training takes too, in folds by take; "
+        "content_unseen_takes: the held-out takes folded too, each clip judged by networks "
+        "that never saw the take its motion comes from; "
         "style_linear, content: logistic regression; foot skating in cm/s; hand reach: cm "
         "above the head over clips of hand actions)",
     }

@@ -91,17 +91,17 @@ def test_hand_reach_is_how_far_the_higher_hand_gets_above_the_head():
 
 def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     t = ES.Tally()
-    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 10.0, (0.6, 0.0), 40.0)
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", "walk", 2.0, 10.0, (0.6, 0.0), 40.0)
     t.add(
-        ES.Verdict("angry", "sad", "walk", "run", "walk", 2.0, -30.0, (0.0, 0.0), 50.0),
+        ES.Verdict("angry", "sad", "walk", "run", "walk", "run", 2.0, -30.0, (0.0, 0.0), 50.0),
         "angry", "walk", source, "sad",
     )  # fmt: skip
     t.add(
-        ES.Verdict("sad", "sad", "run", "run", "walk", 4.0, -40.0, (0.0, 0.0), 40.0),
+        ES.Verdict("sad", "sad", "run", "run", "walk", "walk", 4.0, -40.0, (0.0, 0.0), 40.0),
         "angry", "run", source, "sad",
     )  # fmt: skip
     t.add(
-        ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", 3.0, 12.5, (0.9, 0.7), 0.0),
+        ES.Verdict("sad", "sad", "walk", "run", "wave-left-hand", "wave-left-hand", 3.0, 12.5, (0.9, 0.7), 0.0),
         "angry", "wave-left-hand", source, "sad",
     )  # fmt: skip
     row = t.summary()
@@ -114,6 +114,7 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     assert row["content_accuracy"] == 0.6667 and row["content_accuracy_conv"] == 0.3333
     assert row["content_accuracy_all_takes"] == 0.6667
     assert row["content_accuracy_all_takes_merged"] == 0.6667  # run is not a walk
+    assert row["content_accuracy_unseen_takes"] == 0.3333
     assert row["content_missed_all_takes"] == {"run -> walk": 1}
     assert row["hand_actions"] == 1 and row["hand_reach_cm"] == 12.5  # hand actions only
     assert row["hand_use_error"] == 0.5  # (|0.9 - 0.6| + |0.7 - 0|) / 2, hand actions only
@@ -127,8 +128,9 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
     table = ES.markdown(report)
     assert "hand actions" not in table  # a split no clip fell into is left out, not a crash
     assert "content accuracy (conv)" in table and "content accuracy (all takes)" in table
+    assert "content accuracy (unseen takes)" in table
     assert (
-        "| translator | 3 | 33.3% | 0.0% | 66.7% | 66.7% | 33.3% | 66.7% | 66.7% | 3.0 "
+        "| translator | 3 | 33.3% | 0.0% | 66.7% | 66.7% | 33.3% | 66.7% | 66.7% | 33.3% | 3.0 "
         "| +12.5 (1) "
         "| 50.0% | 16.7 |" in table
     )
@@ -136,9 +138,9 @@ def test_tally_counts_both_content_classifiers_and_the_table_shows_them():
 
 
 def test_gap_intervals_resample_takes_and_need_the_same_clips():
-    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
-    right = ES.Verdict("angry", "angry", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
-    wrong = ES.Verdict("sad", "sad", "run", "run", "run", 2.0, 0.0, (0.0, 0.0), 0.0)
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
+    right = ES.Verdict("angry", "angry", "walk", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 0.0)
+    wrong = ES.Verdict("sad", "sad", "run", "run", "run", "run", 2.0, 0.0, (0.0, 0.0), 0.0)
     transfers, real = ES.Tally(), ES.Tally()
     # take a: the transfer right 2 of 4 times, the real clip 4 of 4; take b: both 4 of 4
     for take, outs in (("a", [right, wrong, right, wrong]), ("b", [right] * 4)):
@@ -161,6 +163,7 @@ def test_gap_intervals_resample_takes_and_need_the_same_clips():
     found = ES.gaps(rows, "translator")
     assert found["style: translator (pairs) - real target"]["gap"] == -0.25
     assert found["content (all takes): translator - unchanged"]["gap"] == -0.25
+    assert found["content (unseen takes): translator - unchanged"]["gap"] == -0.25
     report = {
         "family": "translator", "model": "m 1", "held_out_takes": 2, "takes_of": "translator",
         "takes_unseen_by_family": 2, "styles": 2, "chance_style": 0.5, "chance_content": 0.5,
@@ -174,13 +177,17 @@ def test_gap_intervals_resample_takes_and_need_the_same_clips():
 
 def test_merged_content_counts_a_turning_walk_read_as_a_walk_and_a_wave_by_either_name():
     t = ES.Tally()
-    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 90.0)
+    source = ES.Verdict("sad", "sad", "walk", "walk", "walk", "walk", 2.0, 0.0, (0.0, 0.0), 90.0)
     said = ["walk", "run", "walk-turn-right", "walk-turn-left"]
     for content_all in said:
-        verdict = ES.Verdict("sad", "sad", "walk", "walk", content_all, 2.0, 0.0, (0, 0), 90.0)
+        verdict = ES.Verdict(
+            "sad", "sad", "walk", "walk", content_all, content_all, 2.0, 0.0, (0, 0), 90.0
+        )
         t.add(verdict, "sad", "walk-turn-left", source)
     for content_all in ["bye", "byebye", "wave-left-hand"]:  # only bye is a right-hand wave
-        verdict = ES.Verdict("sad", "sad", "walk", "walk", content_all, 2.0, 0.0, (0, 0), 0.0)
+        verdict = ES.Verdict(
+            "sad", "sad", "walk", "walk", content_all, content_all, 2.0, 0.0, (0, 0), 0.0
+        )
         t.add(verdict, "sad", "wave-right-hand", source)
     row = t.summary()
     assert row["content_accuracy_all_takes"] == round(1 / 7, 4)  # walk-turn-left itself
@@ -266,6 +273,7 @@ def test_classifiers_are_kept_and_trained_again_only_for_other_takes(tmp_path, m
     ES.classifiers_for(held, training, False, tmp_path)  # no mirrors
     assert len(trained) == 4 and len(list(tmp_path.glob("classifiers-*.pkl"))) == 4
     assert again.content_all.predict(x, 0) in {"walk", "run"}
+    assert again.content_unseen.predict(x, again.content_unseen.fold_of("h0")) in {"walk", "run"}
     ES.classifiers_for(held, training, True, None)  # no cache: trains
     assert len(trained) == 5
 
@@ -311,6 +319,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_translator(tmp_path, monkeypa
     for row in rows.values():  # merging names can only add hits
         if row["n"]:
             assert row["content_accuracy_all_takes_merged"] >= row["content_accuracy_all_takes"]
+            assert 0.0 <= row["content_accuracy_unseen_takes"] <= 1.0
     assert rows["translator"]["foot_skating_cm_s"] >= 0.0
     assert sum(r["n"] for r in report["per_style"].values()) == styles
     assert "| translator |" in ES.markdown(report)
