@@ -534,6 +534,41 @@ def test_raised_hands_term_is_logged_only_when_weighted():
     assert float(total_feet - total_off) == pytest.approx(want, rel=1e-4)
 
 
+def test_reconstruction_velocity_term_compares_joint_velocities_when_weighted():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    stats = identity_stats()
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
+
+    def generate(**weights):
+        losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(**weights))
+        with torch.no_grad():
+            torch.manual_seed(1)
+            return losses, losses.generator(m, n, x)
+
+    _, (total_off, logs_off, *_) = generate()
+    losses, (total_on, logs_on, *_) = generate(w_rec_vel=2.0)
+    with torch.no_grad():
+        torch.manual_seed(1)
+        use2d = torch.rand(2) < losses.cfg.p_style2d
+        rec = g.decoder(g.content_encoder(m.content), losses.style_codes(n, use2d)[1])
+        pos = losses.positions(rec, m.hips_height)
+    want = float((pos.diff(dim=1) - m.positions.diff(dim=1)).abs().mean())
+    assert logs_off["rec_vel_cm_s"] == 0.0 and want > 0.0
+    assert logs_on["rec_vel_cm_s"] == pytest.approx(want * Fe.LEG * C.FPS, rel=1e-4)
+    assert float(total_on - total_off) == pytest.approx(2.0 * want, rel=1e-4)
+    # a content standing still: the term is the reconstruction's own speed
+    still = m.positions[:, :1].expand_as(m.positions).clone()
+    m.positions = still
+    _, (_, logs_still, *_) = generate(w_rec_vel=1.0)
+    assert logs_still["rec_vel_cm_s"] == pytest.approx(
+        float(pos.diff(dim=1).abs().mean()) * Fe.LEG * C.FPS, rel=1e-4
+    )
+
+
 def stepping_feet(frames: int = 32) -> torch.Tensor:
     """Root-local positions ``(1, frames, 21, 3)``: a body 1 leg length up whose feet take
     turns, each foot joint at its ground level (ankle 0.08, toes 0.02) when planted and
