@@ -764,9 +764,10 @@ class Validator:
             err = (losses.positions(rec, h) - m_pos).norm(dim=-1).mean() * Fe.LEG
             sums["rec_pos_cm"] += float(err) * k
             sums["rec_rot"] += float(F.l1_loss(rec, m_content[:, : Fe.OUTPUT_CHANNELS])) * k
-            err = (losses.positions(own, h) - m_pos).norm(dim=-1).mean() * Fe.LEG
+            own_pos = losses.positions(own, h)
+            err = (own_pos - m_pos).norm(dim=-1).mean() * Fe.LEG
             sums["self_pos_cm"] += float(err) * k
-            own_vel = losses.positions(own, h).diff(dim=1) - m_pos.diff(dim=1)
+            own_vel = own_pos.diff(dim=1) - m_pos.diff(dim=1)
             sums["self_vel_cm_s"] += float(own_vel.norm(dim=-1).mean()) * Fe.LEG * C.FPS * k
             truth = self.m.style[sl]
             for name, z in (("style_acc_3d", z3), ("style_acc_2d", z2)):
