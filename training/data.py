@@ -5,6 +5,8 @@
 - CMU dance: salsa (60/61), Indian classical (94), modern (05) with a genre label.
 - Dance with Melody: 3D marker positions fitted to the canonical skeleton with
   the IK, resampled to 30 fps, with the song's audio and where the dance sits in it.
+- Unlabelled motion (``load_unlabelled_motion``): all of the above but Bandai, plus the
+  CMU 31-joint takes and Xia's clips, without labels.
 
 Clips carry a ``take`` id: splits are made by take, never by window, so no
 validation frame is seen in training. The cache lives in ``$MOTION_CACHE_DIR``
@@ -19,7 +21,7 @@ import hashlib
 import json
 import os
 import tarfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -238,6 +240,35 @@ def load_cmu_dance(root: Path | None = None) -> list[Clip]:
         return clips
 
     return _cached("cmu_dance", files, build)
+
+
+# --------------------------------------------------------------------------- CMU 31 and Xia
+
+
+def load_bvh_folder(folder: str, root: Path | None = None) -> list[Clip]:
+    """Every BVH of a data folder (``cmu-31``, ``xia``), canonical, named by file, no labels."""
+    files = sorted(((root or data_dir()) / folder).glob("*.bvh"))
+
+    def build() -> list[Clip]:
+        return [_to_clip(bvh.load(p), name=p.stem, dataset=folder, take=p.stem) for p in files]
+
+    return _cached(folder.replace("-", "_"), files, build)
+
+
+def load_unlabelled_motion(root: Path | None = None) -> list[Clip]:
+    """Every motion in the data but Bandai's, labels dropped: CMU 31-joint takes, Xia's
+    styled clips, CMU dance and Dance with Melody (about 54k frames at 30 fps), each take
+    once (CMU 05_20 is in both CMU folders)."""
+    clips = (
+        load_bvh_folder("cmu-31", root)
+        + load_bvh_folder("xia", root)
+        + load_cmu_dance(root)
+        + load_dance_with_melody(root)
+    )
+    firsts = {}
+    for c in clips:
+        firsts.setdefault(c.take, replace(c, style=None, content=None, genre=None))
+    return list(firsts.values())
 
 
 # --------------------------------------------------------------------------- splits

@@ -84,3 +84,17 @@ def test_dance_audio_covers_the_motion():
     clip = next(c for c in data.load_dance_with_melody() if c.name == "DANCE_W_14")
     samples, sr = data.clip_audio(clip)
     assert abs(len(samples) / sr - clip.num_frames / 30.0) < 0.05
+
+
+def test_unlabelled_motion_is_every_non_bandai_clip_without_labels():
+    for folder in ("cmu-31", "xia", "cmu-dance-43", "dance-with-melody"):
+        data_path(folder)
+    clips = data.load_unlabelled_motion()
+    assert {c.dataset for c in clips} == {"cmu-31", "xia", "cmu-dance", "dance-with-melody"}
+    assert len({c.take for c in clips}) == len(clips) == 9 + 9 + 7 + 23 - 1  # 05_20 twice
+    assert all(c.style is None and c.content is None and c.genre is None for c in clips)
+    xia = next(c for c in clips if c.name == "angry_13_000")  # 140 frames at 120 fps
+    assert abs(xia.num_frames - 140 / 4) <= 1
+    for c in clips[::6]:
+        g = K.global_positions(c.motion)
+        assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name

@@ -569,6 +569,84 @@ def test_reconstruction_velocity_term_compares_joint_velocities_when_weighted():
     )
 
 
+def test_extra_windows_add_their_own_reconstruction_under_the_reconstruction_weights():
+    from training.translator import train as T
+
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3)
+    stats = identity_stats()
+    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
+    e = random_batch(3, 32, [-1, -1, -1])  # unlabelled: no style index
+    weights = {"w_rec_rot": 0.5, "w_rec_pos": 4.0, "w_rec_vel": 3.0}
+    losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(**weights))
+
+    def generate(extra):
+        with torch.no_grad():
+            torch.manual_seed(1)
+            return losses.generator(m, n, x, e=extra)
+
+    total_off, logs_off, *_ = generate(None)
+    total_on, logs_on, *_ = generate(e)
+    with torch.no_grad():  # e decoded from its own content code with its own 3D style code
+        rec = g.decoder(g.content_encoder(e.content), g.style3d(e.style3d))
+        pos = losses.positions(rec, e.hips_height)
+    rot_l1 = float((rec - e.rotations).abs().mean())
+    pos_l1 = float((pos - e.positions).abs().mean())
+    vel_l1 = float((pos.diff(dim=1) - e.positions.diff(dim=1)).abs().mean())
+    assert logs_off["extra_rec_pos_cm"] == 0.0
+    assert logs_on["extra_rec_pos_cm"] == pytest.approx(pos_l1 * Fe.LEG, rel=1e-5)
+    want = 0.5 * rot_l1 + 4.0 * pos_l1 + 3.0 * vel_l1
+    assert float(total_on - total_off) == pytest.approx(want, rel=1e-4)
+    # the labelled windows' own terms are untouched
+    for key in ("rec_pos_cm", "rec_vel_cm_s", "adv_g"):
+        assert logs_on[key] == logs_off[key]
+
+
+def test_random_windows_fit_their_clips_and_favour_long_ones():
+    def clip(frames: int, take: str) -> TD.EncodedClip:
+        return TD.EncodedClip(
+            content=np.zeros((frames, Fe.CONTENT_CHANNELS), np.float32),
+            style3d=np.zeros((frames, Fe.STYLE3D_CHANNELS), np.float32),
+            style2d=np.zeros((1, frames, Fe.STYLE2D_CHANNELS), np.float32),
+            style=-1,
+            take=take,
+        )
+
+    clips = [clip(20, "short"), clip(63, "long"), clip(32 + 9, "mid")]  # 0, 32 and 10 windows
+    items = TD.random_windows(clips, 32, 4200, np.random.default_rng(0))
+    assert all(0 <= s <= c.num_frames - 32 for c, s in items)
+    counts = {take: sum(c.take == take for c, _ in items) for take in ("short", "long", "mid")}
+    assert counts["short"] == 0
+    assert counts["long"] / counts["mid"] == pytest.approx(3.2, rel=0.15)
+    starts = {s for c, s in items if c.take == "long"}
+    assert starts == set(range(32))  # every start of the long clip drawn
+    windows = TD.cut(items[:5], 32)
+    assert windows.content.shape == (5, 32, Fe.CONTENT_CHANNELS)
+
+
+def test_smoke_training_with_unlabelled_motion():
+    data_path("bandai", "dataset-1")
+    for folder in ("cmu-31", "xia", "cmu-dance-43", "dance-with-melody"):
+        data_path(folder)
+    from training.translator import train as T
+
+    cfg = T.TrainConfig(clips_per_style=2, val_fraction=0.5, views=1, extra_batch=4)
+    prep = T.prepare(cfg)
+    from training import data as D
+
+    long_enough = {c.take for c in D.load_unlabelled_motion() if c.num_frames >= cfg.window}
+    assert {c.take for c in prep.extra} == long_enough and len(long_enough) >= 45
+    assert {c.style for c in prep.extra} == {-1} and all(c.label is None for c in prep.extra)
+    assert not {c.take for c in prep.extra} & {c.take for c in prep.train + prep.val}
+    # the statistics are the Bandai training clips' alone
+    assert np.allclose(
+        prep.stats.mean["content"],
+        np.concatenate([c.content for c in prep.train]).mean(0),
+        atol=1e-4,
+    )
+
+
 def stepping_feet(frames: int = 32) -> torch.Tensor:
     """Root-local positions ``(1, frames, 21, 3)``: a body 1 leg length up whose feet take
     turns, each foot joint at its ground level (ankle 0.08, toes 0.02) when planted and

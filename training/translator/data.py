@@ -90,7 +90,7 @@ def encode_clips(
     clips: list[Clip], styles: list[str], min_frames: int, views: int, seed: int
 ) -> list[EncodedClip]:
     """Clips with at least ``min_frames`` frames, encoded with ``views`` 2D projections each;
-    ``styles`` gives the style indices."""
+    ``styles`` gives the style indices (-1 for a clip without a style)."""
     index = {s: i for i, s in enumerate(styles)}
     rng = np.random.default_rng(seed)
     out = []
@@ -101,7 +101,12 @@ def encode_clips(
         style2d = project_views(enc.gpos, rng, views)
         out.append(
             EncodedClip(
-                enc.content, enc.style3d, style2d, index[clip.style], clip.take, clip.content
+                enc.content,
+                enc.style3d,
+                style2d,
+                -1 if clip.style is None else index[clip.style],
+                clip.take,
+                clip.content,
             )
         )
     return out
@@ -211,6 +216,16 @@ class Sampler:
             clip = cs[self.rng.choice(len(cs), p=p)]
             items.append((clip, int(self.rng.integers(0, clip.num_frames - self.length + 1))))
         return items
+
+
+def random_windows(
+    clips: list[EncodedClip], length: int, count: int, rng: np.random.Generator
+) -> list[tuple[EncodedClip, int]]:
+    """``count`` windows at random starts, clips weighted by how many windows they hold."""
+    clips = [c for c in clips if c.num_frames >= length]
+    weights = np.array([c.num_frames - length + 1 for c in clips], dtype=np.float64)
+    chosen = rng.choice(len(clips), size=count, p=weights / weights.sum())
+    return [(clips[i], int(rng.integers(0, clips[i].num_frames - length + 1))) for i in chosen]
 
 
 def fixed_windows(
