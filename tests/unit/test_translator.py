@@ -388,13 +388,18 @@ def identity_stats() -> Fe.FeatureStats:
     )
 
 
+def tiny_networks(**config) -> tuple[M.Translator, M.Discriminator, Fe.FeatureStats]:
+    """A generator and a discriminator of three styles (``config`` adds to their
+    ``ModelConfig``), seeded and in eval mode, and identity feature statistics."""
+    torch.manual_seed(0)
+    cfg = M.ModelConfig(num_styles=3, **config)
+    return M.Translator(cfg).eval(), M.Discriminator(cfg).eval(), identity_stats()
+
+
 def test_content_cycle_translates_to_its_own_style_batch():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks()
     m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
     off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_cycle=0.0))
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_cycle=1.0))
@@ -490,10 +495,7 @@ def test_hand_speed_changed_tells_a_held_raise_from_a_wave():
 def test_raised_hands_term_is_logged_only_when_weighted():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks()
     m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
     m.positions[..., C.INDEX["Hand_L"] - 1, 1] = 50.0  # the content's left hand, far above
 
@@ -537,10 +539,7 @@ def test_raised_hands_term_is_logged_only_when_weighted():
 def test_reconstruction_velocity_term_compares_joint_velocities_when_weighted():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks()
     m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
 
     def generate(**weights):
@@ -572,10 +571,7 @@ def test_reconstruction_velocity_term_compares_joint_velocities_when_weighted():
 def test_extra_windows_add_their_own_reconstruction_under_the_reconstruction_weights():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks()
     m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
     e = random_batch(3, 32, [-1, -1, -1])  # unlabelled: no style index
     weights = {"w_rec_rot": 0.5, "w_rec_pos": 4.0, "w_rec_vel": 3.0}
@@ -694,10 +690,7 @@ def test_ground_translation_leaves_out_a_foot_held_up_all_window():
 def test_translations_are_grounded_for_the_discriminator_only_when_asked():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks()
     m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
     m.positions[:] = stepping_feet().repeat(2, 1, 1, 1)
     runs = {}
@@ -722,10 +715,7 @@ def test_translations_are_grounded_for_the_discriminator_only_when_asked():
 def test_content_heads_judge_translations_by_the_content_windows_label():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3, num_contents=4)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks(num_contents=4)
     scores, _ = d(torch.randn(2, Fe.STYLE3D_CHANNELS + Fe.OUTPUT_CHANNELS, 32))
     assert scores.shape[1] == 3 + 4  # style heads, then content heads
     m, n, x = (random_batch(3, 32, s) for s in ([0, 1, 2], [0, 1, 2], [1, 2, 0]))
@@ -770,10 +760,7 @@ def test_content_heads_judge_translations_by_the_content_windows_label():
 def test_style_heads_classify_reals_and_translations_only_when_weighted():
     from training.translator import train as T
 
-    torch.manual_seed(0)
-    cfg = M.ModelConfig(num_styles=3, num_contents=2)
-    stats = identity_stats()
-    g, d = M.Translator(cfg).eval(), M.Discriminator(cfg).eval()
+    g, d, stats = tiny_networks(num_contents=2)
     m, n, x = (random_batch(3, 32, s) for s in ([0, 1, 2], [0, 1, 2], [1, 2, 0]))
     off = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig())
     on = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_style_cls=0.5))
