@@ -895,3 +895,83 @@ def test_feet_pitched_compares_flat_planted_feet_only():
     held_up = content.clone()
     held_up[0, :, T._FEET[:2], 1] += 0.5  # the left foot never comes down: never compared
     assert float(T.feet_pitched(held_up, translation.detach())) == pytest.approx(0.0, abs=1e-6)
+
+
+def moving_clip(phase: np.ndarray, style: int, label: str | None) -> TD.EncodedClip:
+    """A clip whose body joints trace a curve ``phase`` (frames,) sets the point on:
+    each joint at its own offset from the hips, swept by a different function of the phase."""
+    frames = len(phase)
+    offsets = np.linspace(-1.0, 1.0, 21 * 3).reshape(21, 3)
+    pos = np.zeros((frames, 21, 3), np.float32)
+    pos[:, 1:] = offsets[1:] * (
+        1.0 + np.sin(phase[:, None, None] * (1 + np.arange(20)[:, None] / 7))
+    )
+    pos[:, :, 1] += 1.0  # the hips (joint 0) at a height, the body around them
+    return TD.EncodedClip(
+        content=np.zeros((frames, Fe.CONTENT_CHANNELS), np.float32),
+        style3d=pos.reshape(frames, -1),
+        style2d=np.zeros((1, frames, Fe.STYLE2D_CHANNELS), np.float32),
+        style=style,
+        take=f"take-{style}-{frames}",
+        label=label,
+    )
+
+
+def test_aligned_frames_undo_a_change_of_timing():
+    # b performs the action at an even pace, a lingers over its first half, then hurries
+    b_phase = np.linspace(0.0, 3.0, 90)
+    t = np.linspace(0.0, 1.0, 120)
+    a_time = (t + t**2) / 2
+    a = moving_clip(3.0 * a_time, 0, "wave")
+    b = moving_clip(b_phase, 1, "wave")
+    frames = TD.aligned_frames(a, b)
+    truth = np.interp(3.0 * a_time, b_phase, np.arange(90))
+    assert frames.shape == (120,) and frames[0] == 0 and frames[-1] == 89
+    assert np.all(np.diff(frames) >= 0)
+    assert np.abs(frames - truth).max() <= 1.5
+    # an even stretch would miss by far more
+    assert np.abs(np.linspace(0, 89, 120) - truth).max() > 8
+
+
+def test_paired_targets_are_the_other_styles_clip_at_the_aligned_frames():
+    a = moving_clip(np.linspace(0.0, 3.0, 60), 0, "wave")
+    b = moving_clip(np.linspace(0.0, 3.0, 45), 1, "wave")
+    same_style = moving_clip(np.linspace(0.0, 3.0, 50), 0, "wave")
+    other_label = moving_clip(np.linspace(0.0, 3.0, 50), 2, "bow")
+    alignments = TD.Alignments()
+    items_m = [(a, 10)] * 3
+    items_x = [(b, 5), (same_style, 0), (other_label, 0)]
+    target, paired = alignments.targets(items_m, items_x, 32)
+    assert paired.tolist() == [True, False, False]
+    frames = TD.aligned_frames(a, b)[10:42]
+    assert np.array_equal(target[0], b.style3d[frames].reshape(32, 21, 3))
+    assert not target[1:].any()
+    assert alignments(a, b) is alignments(a, b)  # computed once
+
+
+def test_paired_term_compares_the_translation_with_its_target_relative_to_the_hips():
+    from training.translator import train as T
+
+    g, d, stats = tiny_networks()
+    m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
+    losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_paired=3.0))
+    target = torch.randn(2, 32, 21, 3)
+
+    def generate(paired):
+        with torch.no_grad():
+            torch.manual_seed(1)
+            return losses.generator(m, n, x, paired=paired)
+
+    total_off, logs_off, fake_in, _ = generate(None)
+    total_on, logs_on, *_ = generate((target, torch.tensor([True, False])))
+    pos = fake_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    want = float(T.hips_relative_l1(pos[:1], target[:1]))
+    assert logs_off["paired_cm"] == 0.0 and want > 0.0
+    assert logs_on["paired_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
+    assert float(total_on - total_off) == pytest.approx(3.0 * want, rel=1e-4)
+    # a target standing higher or lower on its hips is the same pose
+    raised = target + torch.tensor([0.0, 0.3, 0.0])
+    _, logs_raised, *_ = generate((raised, torch.tensor([True, False])))
+    assert logs_raised["paired_cm"] == pytest.approx(logs_on["paired_cm"], rel=1e-4)
+    _, logs_none, *_ = generate((target, torch.tensor([False, False])))
+    assert logs_none["paired_cm"] == 0.0

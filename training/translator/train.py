@@ -62,6 +62,12 @@ One step, for a batch of B content windows ``m`` (style s):
   with ``probe_lr`` 1e-2): the held-out probe fell to 72-78%, transfers read as their source
   style to 15%, but style recognition did not rise (44.0 -> 43.9% where a real target
   exists) and content fell 66.6 -> 61.5%: not in the shipped schedule.
+- with ``w_paired`` (and ``pair_content``): the translation to x must match x's own clip, a
+  real performance of m's content label in x's style, at the frames dynamic time warping
+  aligns with m's window (``TD.Alignments``; L1 of the body relative to the hips, as the
+  decoder sets no hips height; not in the paper). Bandai performs each action in up to 19
+  styles: the adversarial terms only say a translation looks like style t, these pairs
+  show what m's action looks like performed in it.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
@@ -166,6 +172,10 @@ class TrainConfig:
     w_style_cls: float = 0.0
     # the content code must not tell a linear probe more of m's style than its content label
     w_content_style: float = 0.0
+    # with pair_content: the translation to x matches x's clip, a real performance of m's
+    # content label in x's style, aligned to m by dynamic time warping (body relative to
+    # the hips)
+    w_paired: float = 0.0
     # translations stand on the content's floor, as the service grounds them
     # (:func:`ground_translation`), not at the content's hips height
     ground_translations: bool = False
@@ -445,6 +455,12 @@ def hand_speed_changed(
     return _beyond(speed(translation) / speed(content), ratio)
 
 
+def hips_relative_l1(positions: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """L1 between two ``(B, T, 21, 3)`` root-local poses relative to their hips (body joint
+    0): the decoder sets no hips height, a real performance of another style has its own."""
+    return F.l1_loss(positions - positions[..., :1, :], target - target[..., :1, :])
+
+
 def _beyond(ratios: torch.Tensor, ratio: float) -> torch.Tensor:
     """Mean of how far (log) ``ratios`` fall outside ``[1 / ratio, ratio]``."""
     return F.relu(torch.log(ratios).abs() - math.log(ratio)).mean()
@@ -534,6 +550,7 @@ class Losses:
         ramp: float = 1.0,
         r: Batch | None = None,
         e: Batch | None = None,
+        paired: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> tuple[torch.Tensor, dict, torch.Tensor, torch.Tensor | None]:
         """Generator loss, its parts, and the discriminator inputs (detached) of the
         translations to x and to ``r`` (None where no term translates to r), so that the
@@ -575,6 +592,9 @@ class Losses:
             style_cls = F.cross_entropy(self.style_logits(scores), x.style)
 
         cycle, raised, lifted, amplitude, speed, pitch = (torch.zeros(()) for _ in range(6))
+        paired_err = torch.zeros(())
+        if paired is not None and bool(paired[1].any()):
+            paired_err = hips_relative_l1(fake_pos[paired[1]], paired[0][paired[1]])
         content_adv = torch.zeros(())
         wild = wild_pos = wild_in = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
@@ -644,6 +664,7 @@ class Losses:
             + ramp * cfg.w_content_adv * content_adv
             + ramp * cfg.w_style_cls * style_cls
             + ramp * cfg.w_content_style * content_style
+            + cfg.w_paired * paired_err
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG,
@@ -654,6 +675,7 @@ class Losses:
             "hand_amplitude": amplitude, "hand_speed": speed, "foot_pitch_cm": pitch * Fe.LEG,
             "content_adv_g": content_adv, "style_cls_g": style_cls,
             "content_style_kl": content_style, "probe_ce": probe_ce, "probe_acc": probe_acc,
+            "paired_cm": paired_err * Fe.LEG,
             "total_g": total,
         }  # fmt: skip
         total = total + probe_ce  # reaches only the probe, which has its own optimizer
@@ -1165,6 +1187,7 @@ def train(
         add_amplitude_group()
 
     sampler = TD.Sampler(prep.train, cfg.window, rng)
+    alignments = TD.Alignments()
     if calibrate:
         items = sampler.pick(sampler.random_styles(CALIBRATION_WINDOWS))
         batch = to_batch(TD.cut(items, cfg.window, rng), norm)
@@ -1262,8 +1285,13 @@ def train(
                 norm,
             )
 
+        paired = None
+        if cfg.w_paired > 0:
+            target, mask = alignments.targets(items_m, items_x, cfg.window)
+            paired = (torch.from_numpy(target), torch.from_numpy(mask))
+
         ramp = min(1.0, step / max(cfg.adv_warmup, 1))
-        loss_g, logs, fake_in, wild_in = losses.generator(m, n, x, ramp, r, e)
+        loss_g, logs, fake_in, wild_in = losses.generator(m, n, x, ramp, r, e, paired)
         opt_g.zero_grad(set_to_none=True)
         if opt_probe is not None:
             opt_probe.zero_grad(set_to_none=True)
