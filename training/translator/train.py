@@ -67,7 +67,10 @@ One step, for a batch of B content windows ``m`` (style s):
   aligns with m's window (``TD.Alignments``; L1 of the body relative to the hips, as the
   decoder sets no hips height; not in the paper). Bandai performs each action in up to 19
   styles: the adversarial terms only say a translation looks like style t, these pairs
-  show what m's action looks like performed in it.
+  show what m's action looks like performed in it. Measured from 0.1.96598: at weights 50
+  and 150, 1,200-7,650 steps, content of all transfers +2.9 to +5.7 points and of unseen
+  takes +1.1 to +4.7, style where a real target exists -1.3 to +0.4 (weights 2 and 8:
+  noise). Shipped as 0.1.100410.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
