@@ -245,6 +245,9 @@ def fixed_windows(
     return items
 
 
+ALIGN_VELOCITY_FRAMES = 1.0  # see alignment_features
+
+
 def alignment_features(clip: EncodedClip) -> np.ndarray:
     """``(F, 126)`` what :func:`aligned_frames` matches: body joints relative to the hips
     (leg lengths) and their change over ``ALIGN_VELOCITY_FRAMES`` frames, which tells a
@@ -255,9 +258,6 @@ def alignment_features(clip: EncodedClip) -> np.ndarray:
     rel = (pos - pos[:, :1]).reshape(clip.num_frames, -1)
     vel = np.gradient(rel, axis=0) * ALIGN_VELOCITY_FRAMES if clip.num_frames > 1 else 0 * rel
     return np.concatenate([rel, vel], axis=1)
-
-
-ALIGN_VELOCITY_FRAMES = 1.0
 
 
 def aligned_frames(a: EncodedClip, b: EncodedClip) -> np.ndarray:
