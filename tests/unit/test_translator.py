@@ -975,3 +975,31 @@ def test_paired_term_compares_the_translation_with_its_target_relative_to_the_hi
     assert logs_raised["paired_cm"] == pytest.approx(logs_on["paired_cm"], rel=1e-4)
     _, logs_none, *_ = generate((target, torch.tensor([False, False])))
     assert logs_none["paired_cm"] == 0.0
+
+
+def test_paired_motion_term_ignores_posture_and_compares_how_joints_move():
+    from training.translator import train as T
+
+    rng = np.random.default_rng(0)
+    positions = torch.from_numpy(rng.normal(size=(2, 32, 21, 3)).astype(np.float32))
+    hunched = positions + torch.from_numpy(rng.normal(size=(21, 3)).astype(np.float32))
+    assert float(T.hips_relative_motion_l1(positions, hunched, 4)) == pytest.approx(0, abs=1e-6)
+    assert float(T.hips_relative_l1(positions, hunched)) > 0.1
+    # a hand still where the target's moves
+    still = positions.clone()
+    still[:, :, 15] = still[:, :1, 15]
+    assert float(T.hips_relative_motion_l1(still, positions, 4)) > 0.01
+
+    g, d, stats = tiny_networks()
+    m, n, x = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2]))
+    losses = T.Losses(g, d, T.Standardizer(stats), T.TrainConfig(w_paired_vel=2.0))
+    target = torch.randn(2, 32, 21, 3)
+    with torch.no_grad():
+        torch.manual_seed(1)
+        total_off, _, fake_in, _ = losses.generator(m, n, x, paired=None)
+        torch.manual_seed(1)
+        total_on, logs, *_ = losses.generator(m, n, x, paired=(target, torch.tensor([False, True])))
+    pos = fake_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    want = float(T.hips_relative_motion_l1(pos[1:], target[1:], 4))
+    assert logs["paired_motion_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
+    assert float(total_on - total_off) == pytest.approx(2.0 * want, rel=1e-4)

@@ -179,6 +179,10 @@ class TrainConfig:
     # content label in x's style, aligned to m by dynamic time warping (body relative to
     # the hips)
     w_paired: float = 0.0
+    # the same pairs' motion: hips-relative displacements over paired_vel_frames, which
+    # leave the style its own posture
+    w_paired_vel: float = 0.0
+    paired_vel_frames: int = 4
     # translations stand on the content's floor, as the service grounds them
     # (:func:`ground_translation`), not at the content's hips height
     ground_translations: bool = False
@@ -464,6 +468,18 @@ def hips_relative_l1(positions: torch.Tensor, target: torch.Tensor) -> torch.Ten
     return F.l1_loss(positions - positions[..., :1, :], target - target[..., :1, :])
 
 
+def hips_relative_motion_l1(
+    positions: torch.Tensor, target: torch.Tensor, frames: int
+) -> torch.Tensor:
+    """L1 between how far each joint of two ``(B, T, 21, 3)`` root-local poses moves,
+    relative to the hips, over ``frames`` frames: the action's motion without the posture,
+    which a style may change. Over a few frames, not one, because time warping repeats and
+    skips frames of the target."""
+    rel = positions - positions[..., :1, :]
+    ref = target - target[..., :1, :]
+    return F.l1_loss(rel[:, frames:] - rel[:, :-frames], ref[:, frames:] - ref[:, :-frames])
+
+
 def _beyond(ratios: torch.Tensor, ratio: float) -> torch.Tensor:
     """Mean of how far (log) ``ratios`` fall outside ``[1 / ratio, ratio]``."""
     return F.relu(torch.log(ratios).abs() - math.log(ratio)).mean()
@@ -595,9 +611,14 @@ class Losses:
             style_cls = F.cross_entropy(self.style_logits(scores), x.style)
 
         cycle, raised, lifted, amplitude, speed, pitch = (torch.zeros(()) for _ in range(6))
-        paired_err = torch.zeros(())
+        paired_err = paired_motion = torch.zeros(())
         if paired is not None and bool(paired[1].any()):
-            paired_err = hips_relative_l1(fake_pos[paired[1]], paired[0][paired[1]])
+            fake_paired, target_paired = fake_pos[paired[1]], paired[0][paired[1]]
+            paired_err = hips_relative_l1(fake_paired, target_paired)
+            if cfg.w_paired_vel > 0:
+                paired_motion = hips_relative_motion_l1(
+                    fake_paired, target_paired, cfg.paired_vel_frames
+                )
         content_adv = torch.zeros(())
         wild = wild_pos = wild_in = None
         if cfg.w_cycle > 0 or cfg.w_raised_hands > 0:
@@ -668,6 +689,7 @@ class Losses:
             + ramp * cfg.w_style_cls * style_cls
             + ramp * cfg.w_content_style * content_style
             + cfg.w_paired * paired_err
+            + cfg.w_paired_vel * paired_motion
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG,
@@ -678,7 +700,7 @@ class Losses:
             "hand_amplitude": amplitude, "hand_speed": speed, "foot_pitch_cm": pitch * Fe.LEG,
             "content_adv_g": content_adv, "style_cls_g": style_cls,
             "content_style_kl": content_style, "probe_ce": probe_ce, "probe_acc": probe_acc,
-            "paired_cm": paired_err * Fe.LEG,
+            "paired_cm": paired_err * Fe.LEG, "paired_motion_cm": paired_motion * Fe.LEG,
             "total_g": total,
         }  # fmt: skip
         total = total + probe_ce  # reaches only the probe, which has its own optimizer
@@ -1289,7 +1311,7 @@ def train(
             )
 
         paired = None
-        if cfg.w_paired > 0:
+        if cfg.w_paired > 0 or cfg.w_paired_vel > 0:
             target, mask = alignments.targets(items_m, items_x, cfg.window)
             paired = (torch.from_numpy(target), torch.from_numpy(mask))
 
