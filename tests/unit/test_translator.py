@@ -1003,3 +1003,24 @@ def test_paired_motion_term_ignores_posture_and_compares_how_joints_move():
     want = float(T.hips_relative_motion_l1(pos[1:], target[1:], 4))
     assert logs["paired_motion_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
     assert float(total_on - total_off) == pytest.approx(2.0 * want, rel=1e-4)
+
+
+def test_translations_to_a_style_without_that_action_move_as_the_content_does():
+    from training.translator import train as T
+
+    g, d, stats = tiny_networks()
+    m, n, x, r = (random_batch(2, 32, s) for s in ([0, 1], [0, 1], [1, 2], [2, 0]))
+
+    def generate(weight):
+        cfg = T.TrainConfig(w_raised_hands=1.0, w_wild_motion=weight)
+        with torch.no_grad():
+            torch.manual_seed(1)
+            return T.Losses(g, d, T.Standardizer(stats), cfg).generator(m, n, x, r=r)
+
+    total_off, logs_off, _, _ = generate(0.0)
+    total_on, logs_on, _, wild_in = generate(2.0)
+    wild_pos = wild_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    want = float(T.hips_relative_motion_l1(wild_pos, m.positions, 4))
+    assert logs_off["wild_motion_cm"] == 0.0 and want > 0.0
+    assert logs_on["wild_motion_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
+    assert float(total_on - total_off) == pytest.approx(2.0 * want, rel=1e-4)

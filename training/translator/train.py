@@ -183,6 +183,9 @@ class TrainConfig:
     # leave the style its own posture
     w_paired_vel: float = 0.0
     paired_vel_frames: int = 4
+    # translations to a style that never performs m's content have no real target: they
+    # move each joint as m does (hips-relative, over paired_vel_frames), posture left free
+    w_wild_motion: float = 0.0
     # translations stand on the content's floor, as the service grounds them
     # (:func:`ground_translation`), not at the content's hips height
     ground_translations: bool = False
@@ -637,6 +640,9 @@ class Losses:
             cycle = F.l1_loss(again, z_content.detach())
         if cfg.w_raised_hands > 0:
             raised = hands_dropped(m.positions, wild_pos)
+        wild_motion = torch.zeros(())
+        if cfg.w_wild_motion > 0 and wild_in is not None:
+            wild_motion = hips_relative_motion_l1(wild_pos, m.positions, cfg.paired_vel_frames)
 
         def on_translations(term, *args) -> torch.Tensor:
             """``term`` of the translation to x, averaged with the one to r if there is one."""
@@ -690,6 +696,7 @@ class Losses:
             + ramp * cfg.w_content_style * content_style
             + cfg.w_paired * paired_err
             + cfg.w_paired_vel * paired_motion
+            + cfg.w_wild_motion * wild_motion
         )
         logs = {
             "rec_rot": rec_rot, "rec_pos_cm": rec_pos * Fe.LEG,
@@ -701,6 +708,7 @@ class Losses:
             "content_adv_g": content_adv, "style_cls_g": style_cls,
             "content_style_kl": content_style, "probe_ce": probe_ce, "probe_acc": probe_acc,
             "paired_cm": paired_err * Fe.LEG, "paired_motion_cm": paired_motion * Fe.LEG,
+            "wild_motion_cm": wild_motion * Fe.LEG,
             "total_g": total,
         }  # fmt: skip
         total = total + probe_ce  # reaches only the probe, which has its own optimizer
