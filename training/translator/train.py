@@ -71,6 +71,14 @@ One step, for a batch of B content windows ``m`` (style s):
   and 150, 1,200-7,650 steps, content of all transfers +2.9 to +5.7 points and of unseen
   takes +1.1 to +4.7, style where a real target exists -1.3 to +0.4 (weights 2 and 8:
   noise). Shipped as 0.1.100410.
+  With ``w_paired_vel``, each joint's displacement over ``paired_vel_frames`` (relative to
+  the hips) is compared as well, a term that leaves the style its posture: from 0.1.100410
+  at weight 50 beside ``w_paired`` 50, content -1.5 to -2.5 points, not kept.
+- with ``w_wild_motion``: the translation to r, a style that never performs m's content
+  (no real target), moves each joint as m does over ``paired_vel_frames`` (hips-relative),
+  posture left free (not in the paper). From 0.1.100410 at weight 100: content of all
+  transfers +3.2 to +4.1 points after 5,000-7,500 steps, of unseen takes +1.4 to +1.8,
+  style where a real target exists -0.6 to -0.2. Shipped as 0.1.105388.
 - 2D views of n and x go through the 2D style encoder: joint embedding loss (eq. 6); the
   decoder is fed the 3D or the 2D code (chosen per sample), so it learns to use both.
 - triplet loss on 3D codes (eq. 7): ``|z(n) - z(m)|`` shorter than ``|z(n) - z(x)|`` by a margin.
