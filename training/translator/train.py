@@ -476,7 +476,11 @@ def hand_speed_changed(
 def hips_relative_l1(positions: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """L1 between two ``(B, T, 21, 3)`` root-local poses relative to their hips (body joint
     0): the decoder sets no hips height, a real performance of another style has its own."""
-    return F.l1_loss(positions - positions[..., :1, :], target - target[..., :1, :])
+    return F.l1_loss(_relative_to_hips(positions), _relative_to_hips(target))
+
+
+def _relative_to_hips(positions: torch.Tensor) -> torch.Tensor:
+    return positions - positions[..., :1, :]
 
 
 def hips_relative_motion_l1(
@@ -486,8 +490,7 @@ def hips_relative_motion_l1(
     relative to the hips, over ``frames`` frames: the action's motion without the posture,
     which a style may change. Over a few frames, not one, because time warping repeats and
     skips frames of the target."""
-    rel = positions - positions[..., :1, :]
-    ref = target - target[..., :1, :]
+    rel, ref = _relative_to_hips(positions), _relative_to_hips(target)
     return F.l1_loss(rel[:, frames:] - rel[:, :-frames], ref[:, frames:] - ref[:, :-frames])
 
 
