@@ -949,6 +949,12 @@ def test_paired_targets_are_the_other_styles_clip_at_the_aligned_frames():
     assert alignments(a, b) is alignments(a, b)  # computed once
 
 
+def disc_positions(disc_input: torch.Tensor) -> torch.Tensor:
+    """``(B, T, 21, 3)`` joint positions of a discriminator input ``(B, C, T)``."""
+    b, _, t = disc_input.shape
+    return disc_input[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(b, t, 21, 3)
+
+
 def test_paired_term_compares_the_translation_with_its_target_relative_to_the_hips():
     from training.translator import train as T
 
@@ -964,7 +970,7 @@ def test_paired_term_compares_the_translation_with_its_target_relative_to_the_hi
 
     total_off, logs_off, fake_in, _ = generate(None)
     total_on, logs_on, *_ = generate((target, torch.tensor([True, False])))
-    pos = fake_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    pos = disc_positions(fake_in)
     want = float(T.hips_relative_l1(pos[:1], target[:1]))
     assert logs_off["paired_cm"] == 0.0 and want > 0.0
     assert logs_on["paired_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
@@ -999,7 +1005,7 @@ def test_paired_motion_term_ignores_posture_and_compares_how_joints_move():
         total_off, _, fake_in, _ = losses.generator(m, n, x, paired=None)
         torch.manual_seed(1)
         total_on, logs, *_ = losses.generator(m, n, x, paired=(target, torch.tensor([False, True])))
-    pos = fake_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    pos = disc_positions(fake_in)
     want = float(T.hips_relative_motion_l1(pos[1:], target[1:], 4))
     assert logs["paired_motion_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
     assert float(total_on - total_off) == pytest.approx(2.0 * want, rel=1e-4)
@@ -1019,7 +1025,7 @@ def test_translations_to_a_style_without_that_action_move_as_the_content_does():
 
     total_off, logs_off, _, _ = generate(0.0)
     total_on, logs_on, _, wild_in = generate(2.0)
-    wild_pos = wild_in[:, : Fe.STYLE3D_CHANNELS].transpose(1, 2).reshape(2, 32, 21, 3)
+    wild_pos = disc_positions(wild_in)
     want = float(T.hips_relative_motion_l1(wild_pos, m.positions, 4))
     assert logs_off["wild_motion_cm"] == 0.0 and want > 0.0
     assert logs_on["wild_motion_cm"] == pytest.approx(want * Fe.LEG, rel=1e-4)
