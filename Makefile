@@ -19,7 +19,7 @@ $(VENV)/.serve: pyproject.toml | $(PY)
 	touch $@
 
 $(VENV)/.dev: pyproject.toml | $(PY)
-	$(PY) -m pip install -q -e ".[serve,train,dev]"
+	$(PY) -m pip install -q -e ".[serve,train,dev,client]"
 	touch $@ $(VENV)/.serve
 
 setup: $(VENV)/.dev
