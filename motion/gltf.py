@@ -104,12 +104,14 @@ def _read(doc: _Document, max_frames: int, rest_if_unanimated: bool) -> Motion:
             else:
                 lpos[:, track.joint] = values
     lrot, lpos = _to_world_aligned(rig, lrot, lpos)
-    moving = np.abs(lpos - lpos[:1]).max(axis=0).max(axis=-1) > 1e-6 * max(rig.height, 1e-6)
+    offsets = _world_offsets(rig)
+    # position channels where a joint leaves its rest offset (BVH output keeps them)
+    moving = np.abs(lpos - offsets).max(axis=0).max(axis=-1) > 1e-6 * max(rig.height, 1e-6)
     channels = tuple(
         _POSITION + _ROTATION_ORDER if j == 0 or moving[j] else _ROTATION_ORDER
         for j in range(len(rig.nodes))
     )
-    skeleton = Skeleton(rig.names, rig.parents, _world_offsets(rig), channels)
+    skeleton = Skeleton(rig.names, rig.parents, offsets, channels)
     return Motion(skeleton, fps, lrot, lpos)
 
 

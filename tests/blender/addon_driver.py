@@ -1,6 +1,6 @@
-"""Run inside Blender: ``blender -b --factory-startup --python addon_driver.py -- ZIP BVH
+"""Run inside Blender: ``blender -b --factory-startup --python addon_driver.py -- ZIP CLIP
 SERVER STYLE STRENGTH OUT_FOLDER``. Installs and enables the add-on from its zip, imports
-the BVH, loads the styles, runs ``motion_style.transfer`` on the armature, and writes
+the clip (BVH, or a GLB through Blender's glTF importer), loads the styles, runs ``motion_style.transfer`` on the armature, and writes
 what happened to OUT_FOLDER/report.json, with BVH exports of the action before
 (before.bvh) and after (after.bvh) for the test to compare with the service's answer."""
 
@@ -19,16 +19,28 @@ def export(obj, path):
 
 
 def main():
-    zip_path, bvh_path, server, style, strength, out = sys.argv[sys.argv.index("--") + 1 :]
+    zip_path, clip_path, server, style, strength, out = sys.argv[sys.argv.index("--") + 1 :]
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.preferences.addon_install(filepath=zip_path)
     addon_utils.enable("motion_style", default_set=True, handle_error=None)
     import motion_style
     from motion_style import restyle
 
-    restyle.readable_bvh_importer()
-    bpy.ops.import_anim.bvh(filepath=bvh_path, update_scene_fps=True, update_scene_duration=True)
-    armature = bpy.context.view_layer.objects.active
+    if clip_path.endswith(".glb"):  # bones oriented by the glTF importer, not by a BVH's
+        import numpy
+
+        if not hasattr(numpy, "bool"):  # Blender 3.4's glTF importer uses np.bool (numpy<1.24)
+            numpy.bool = bool
+        bpy.context.scene.render.fps = 30
+        bpy.ops.import_scene.gltf(filepath=clip_path)
+        armature = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+        bpy.context.view_layer.objects.active = armature
+    else:
+        restyle.readable_bvh_importer()
+        bpy.ops.import_anim.bvh(
+            filepath=clip_path, update_scene_fps=True, update_scene_duration=True
+        )
+        armature = bpy.context.view_layer.objects.active
     original = armature.animation_data.action
     report = {
         "addon_file": motion_style.__file__,
