@@ -9,6 +9,7 @@ file's rest pose (the nodes' own TRS) leaves aligned with the world, as a BVH ex
 does, so identity rotations are the rest pose and the retargeting reads the file as it
 would a BVH of it. Transforms of the nodes above the root and uniform scales are folded
 into the root and the offsets (glTF is Y up, metres), and unfolded on the way out.
+glTF has no End Sites: a leaf joint ends at its node.
 
 Writing keeps every node, mesh, skin, material and other animation of the file: the
 animation that was read gets new samplers and channels (rotation of every rig joint,
