@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import json
 import os
 import warnings
 from collections.abc import Iterator
@@ -78,8 +79,36 @@ def loads(
     error before anything is sampled. With ``rest_if_unanimated`` a file with no animation
     reads as one frame of its rest pose (a rig to retarget onto) instead of an error.
     """
+    return read(data, max_frames=max_frames, rest_if_unanimated=rest_if_unanimated).motion
+
+
+class GltfFile:
+    """A parsed glTF file: ``motion`` (its rig's motion, as :func:`loads` reads it) and
+    :meth:`write`, which puts a new motion into it (as :func:`dumps`) without parsing the
+    file again (pygltflib's parsing is the slow part)."""
+
+    def __init__(self, doc: _Document, motion: Motion) -> None:
+        self._doc = doc
+        self.motion = motion
+
+    def write(self, motion: Motion) -> bytes:
+        """GLB bytes of this file with ``motion`` in place of its animation."""
+        import copy
+
+        with _malformed_as_motion_error():
+            doc = copy.copy(self._doc)
+            doc.gltf = copy.deepcopy(self._doc.gltf)  # the writer edits the document
+            doc.gltf.set_binary_blob(self._doc.gltf.binary_blob())
+            return _write(doc, motion)
+
+
+def read(
+    data: bytes, *, max_frames: int | None = None, rest_if_unanimated: bool = False
+) -> GltfFile:
+    """Parse glTF ``data`` once: its motion (options as for :func:`loads`) and a writer."""
     with _malformed_as_motion_error():
-        return _read(_Document(data), max_frames or MAX_FRAMES, rest_if_unanimated)
+        doc = _Document(data)
+        return GltfFile(doc, _read(doc, max_frames or MAX_FRAMES, rest_if_unanimated))
 
 
 def _read(doc: _Document, max_frames: int, rest_if_unanimated: bool) -> Motion:
@@ -146,9 +175,10 @@ def _write(doc: _Document, motion: Motion) -> bytes:
     lrot, lpos = _from_world_aligned(rig, motion.lrot, motion.lpos)
     times = (start + np.arange(motion.num_frames) / motion.fps).astype(np.float32)
     rest = rig.rest_pos[None]
+    lrot = rot.make_continuous(lrot)  # neighbouring keys on one side: linear blends agree
     outputs: list[tuple[int, str, np.ndarray]] = []
     for j, node in enumerate(rig.nodes):
-        outputs.append((node, "rotation", rot.make_continuous(rot.normalize(lrot[:, j]))))
+        outputs.append((node, "rotation", lrot[:, j]))
         moves = np.abs(lpos[:, j] - rest[:, j]).max() > 1e-6 * max(rig.height, 1e-6)
         if j == 0 or moves or (j, "translation") in old_channels:
             outputs.append((node, "translation", lpos[:, j]))
@@ -688,7 +718,7 @@ class _Writer:
         old = gltf.animations[self.animation]
         mine = {s.input for s in old.samplers or []} | {s.output for s in old.samplers or []}
         others: set = set()
-        document = gltf.to_dict()
+        document = json.loads(gltf.gltf_to_json())  # to_dict() is 3x slower
         for k, anim in enumerate(document.get("animations", [])):
             if k != self.animation:
                 _collect_accessor_refs(anim, others)

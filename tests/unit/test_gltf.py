@@ -212,6 +212,17 @@ def test_writing_keeps_the_file_and_replaces_only_the_animation():
     assert len(again) == len(out)
 
 
+def test_a_file_read_once_writes_like_dumps_any_number_of_times():
+    data = glb_bytes(rig_gltf(walk_tracks(np.arange(8) / 30), extra_animation=True))
+    parsed = gltf.read(data)
+    np.testing.assert_array_equal(parsed.motion.lrot, gltf.loads(data).lrot)
+    faster = parsed.motion.replace(fps=60.0)
+    first = parsed.write(faster)
+    assert first == gltf.dumps(data, faster)
+    assert parsed.write(faster) == first  # writing left the parsed file as it was
+    assert parsed.write(parsed.motion) == gltf.dumps(data, parsed.motion)
+
+
 def test_a_rig_without_animation_reads_as_its_rest_pose_and_gets_one_written():
     data = glb_bytes(rig_gltf())
     with pytest.raises(MotionError, match="no animation"):
