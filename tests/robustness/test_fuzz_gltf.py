@@ -3,6 +3,7 @@ hang or a huge allocation; what the writer makes of a clip read from one reads b
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -49,7 +50,7 @@ def mutated_json(draw) -> bytes:
         if not path:
             continue
         parent, key = path[-1]
-        parent[key] = draw(st.sampled_from(ODD_VALUES))
+        parent[key] = copy.deepcopy(draw(st.sampled_from(ODD_VALUES)))  # never shared
     return json.dumps(doc).encode()
 
 
