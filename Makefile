@@ -19,7 +19,7 @@ $(VENV)/.serve: pyproject.toml | $(PY)
 	touch $@
 
 $(VENV)/.dev: pyproject.toml | $(PY)
-	$(PY) -m pip install -q -e ".[serve,train,dev]"
+	$(PY) -m pip install -q -e ".[serve,train,dev,client]"
 	touch $@ $(VENV)/.serve
 
 setup: $(VENV)/.dev
@@ -125,3 +125,9 @@ bench: $(VENV)/.dev
 # Static int8 (QDQ, per-channel) fast and translator graphs vs fp32: speed, error, verdict (runs/quantize/).
 quantize: $(VENV)/.dev
 	$(PY) -m model_export.quantize
+
+# The Blender add-on as a zip Blender installs (Edit > Preferences > Add-ons > Install...).
+.PHONY: blender-addon
+blender-addon: dist/motion_style.zip
+dist/motion_style.zip: $(wildcard clients/blender/motion_style/*.py)
+	$(PYTHON) -m clients.addon_zip $@

@@ -1,0 +1,65 @@
+"""The motion-style service over HTTP with the standard library (Blender ships no httpx)."""
+
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+import uuid
+
+
+class ServiceError(Exception):
+    """The service could not be reached or answered with a problem; the message says which."""
+
+
+def _open(request: urllib.request.Request, timeout: float) -> bytes:
+    try:
+        with urllib.request.urlopen(request, timeout=timeout) as response:
+            return response.read()
+    except urllib.error.HTTPError as exc:
+        body = exc.read()
+        try:
+            problem = json.loads(body)
+            detail = problem.get("detail") or problem.get("title")
+        except (ValueError, AttributeError):
+            detail = body[:200].decode("utf-8", "replace")
+        raise ServiceError(f"{exc.code}: {detail}") from None
+    except (urllib.error.URLError, OSError) as exc:
+        reason = getattr(exc, "reason", exc)
+        raise ServiceError(f"cannot reach {request.full_url}: {reason}") from None
+
+
+def styles(server: str, timeout: float = 10.0) -> list[str]:
+    """Names of the translator's styles (``GET /v1/styles``), shipped and registered."""
+    body = _open(urllib.request.Request(server.rstrip("/") + "/v1/styles"), timeout)
+    try:
+        listing = json.loads(body)
+        return [s["name"] for s in listing.get("translator", [])]
+    except (ValueError, KeyError, TypeError, AttributeError):
+        raise ServiceError("GET /v1/styles did not answer with a style list") from None
+
+
+def transfer(
+    server: str, content: bytes, style_name: str, strength: float, timeout: float = 300.0
+) -> bytes:
+    """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``."""
+    boundary = uuid.uuid4().hex
+    parts = []
+    for name, value in (("style_name", style_name), ("strength", repr(float(strength)))):
+        parts.append(
+            f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"\r\n\r\n{value}\r\n'.encode()
+        )
+    parts.append(
+        f'--{boundary}\r\nContent-Disposition: form-data; name="content"; '
+        f'filename="content.bvh"\r\nContent-Type: application/octet-stream\r\n\r\n'.encode()
+        + content
+        + b"\r\n"
+    )
+    parts.append(f"--{boundary}--\r\n".encode())
+    request = urllib.request.Request(
+        server.rstrip("/") + "/v1/transfer",
+        data=b"".join(parts),
+        headers={"Content-Type": f"multipart/form-data; boundary={boundary}"},
+        method="POST",
+    )
+    return _open(request, timeout)

@@ -1,0 +1,85 @@
+"""The Blender add-on in headless Blender (Debian's 3.4, ``blender -b``) against the real
+service: installed from the zip ``make blender-addon`` builds, it restyles an imported
+BVH's action into a new action on the same armature, keeping the original, and the new
+action performs exactly the service's answer."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+
+import httpx
+import numpy as np
+import pytest
+
+from clients import addon_zip
+from motion import bvh
+from motion import kinematics as K
+from tests.gltf_files import BLENDER, REPO, blender_run
+from tests.rigs import load_fixture
+from tests.server import ServerProcess
+
+DRIVER = REPO / "tests" / "blender" / "addon_driver.py"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    if BLENDER is None:
+        pytest.skip("Blender is not installed (apt-get install blender python3-numpy)")
+    with ServerProcess(log_path=tmp_path_factory.mktemp("addon-server") / "server.log") as running:
+        yield running
+
+
+@pytest.mark.parametrize("source", ["bvh", "glb"])
+def test_addon_restyles_an_action_in_headless_blender(server, source, tmp_path):
+    """``bvh``: an armature Blender's BVH importer built; ``glb``: one its glTF importer
+    built from Blender's GLB of the same walk (other bone orientations, a skinned mesh)."""
+    package = addon_zip.build(tmp_path / "motion_style.zip")
+    clip = tmp_path / "walk.bvh"
+    bvh.save(load_fixture().slice(0, 60), clip)
+    if source == "glb":
+        blender_run("export", str(clip), str(tmp_path / "walk.glb"))
+        clip = tmp_path / "walk.glb"
+    env = {**os.environ, "BLENDER_USER_SCRIPTS": str(tmp_path / "blender-user")}
+    result = subprocess.run(
+        [BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+         str(DRIVER), "--", str(package), str(clip), server.url, "elderly", "1.0",
+         str(tmp_path)],
+        capture_output=True, text=True, timeout=180, env=env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    # what the service makes of the action Blender exported
+    sent = (tmp_path / "before.bvh").read_bytes()
+    answer = httpx.post(
+        server.url + "/v1/transfer", files={"content": ("walk.bvh", sent)},
+        data={"style_name": "elderly", "strength": "1.0"}, timeout=120,
+    )  # fmt: skip
+    assert answer.status_code == 200, answer.text
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["addon_file"].startswith(str(tmp_path / "blender-user"))  # from the zip
+    assert report["panel"] and report["refresh"] == ["FINISHED"]
+    assert "elderly" in report["styles"] and "angry" in report["styles"]
+    assert report["transfer"] == ["FINISHED"]
+
+    expected = bvh.loads(answer.content)
+    frames = int(answer.headers["X-Frames"])
+    assert expected.num_frames == frames != 60  # elderly is slower: the time warp stretches it
+    new, original = report["active_action"], report["original"]
+    assert new != original and report["actions"] == sorted([original, new])
+    first, last = report["active_range"]
+    assert last - first + 1 == frames and report["keys"] == frames
+    assert report["original_kept"] and report["original_fake_user"]
+    assert report["original_range_after"] == report["original_range"]
+    if source == "bvh":
+        assert report["original_range"] == [1.0, 60.0]
+    assert report["original_curves_after"] == report["original_curves"]
+    assert report["objects_after"] == report["objects_before"]  # no scratch armature left
+    assert "404" in report["bad_style"] and report["action_after_bad_style"] == new
+
+    # the new action performs the service's answer: same joint positions every frame
+    performed = bvh.load(tmp_path / "after.bvh")
+    assert performed.skeleton.names == expected.skeleton.names
+    height = expected.skeleton.height()
+    error = np.abs(K.global_positions(performed) - K.global_positions(expected)).max()
+    assert error < 1e-4 * height, error
