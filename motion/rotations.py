@@ -1,9 +1,10 @@
-"""Quaternion helpers over ``scipy.spatial.transform.Rotation``.
+"""Quaternion helpers, numpy and ``scipy.spatial.transform.Rotation``.
 
 Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
-Products, inverses and vector rotation are plain broadcasting numpy (they run in
-the inner loop of forward kinematics); conversions to and from Euler angles,
-matrices and rotation vectors go through scipy.
+Products, inverses, vector rotation, Euler angles and matrices are plain broadcasting
+numpy (they run in the inner loops of forward kinematics and of BVH reading and writing,
+where scipy's per-call cost dominated); matrices to quaternions and rotation vectors go
+through scipy.
 
 Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
 in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
@@ -12,8 +13,6 @@ two columns of the matrix).
 """
 
 from __future__ import annotations
-
-import warnings
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -124,34 +123,74 @@ def _scipy_order(order: str) -> str:
     return order  # upper case = intrinsic, which is what BVH channels mean
 
 
+def _axes(order: str) -> tuple[int, int, int]:
+    order = _scipy_order(order)
+    return "XYZ".index(order[0]), "XYZ".index(order[1]), "XYZ".index(order[2])
+
+
 def from_euler(e: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Quaternions ``(..., 4)`` from Euler angles ``(..., 3)`` listed in ``order``.
 
     ``order`` is the BVH channel order, e.g. ``"ZXY"``: angles ``e[..., 0]`` about Z,
-    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry.
+    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry. Plain numpy (the
+    product of three axis quaternions): BVH reading converts every joint of every frame.
     """
     e = np.asarray(e, dtype=np.float64)
-    shape = e.shape[:-1]
-    r = Rotation.from_euler(_scipy_order(order), e.reshape(-1, 3), degrees=degrees)
-    return r.as_quat().reshape(shape + (4,))
+    half = (np.deg2rad(e) if degrees else e) * 0.5
+    c, s = np.cos(half), np.sin(half)
+    ca, cb, cc = c[..., 0], c[..., 1], c[..., 2]
+    sa, sb, sc = s[..., 0], s[..., 1], s[..., 2]
+    i, j, k = _axes(order)
+    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
+    # the product (sa e_i, ca)(sb e_j, cb)(sc e_k, cc), written out
+    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+    out = np.empty(e.shape[:-1] + (4,))
+    out[..., i] = sacb * cc + p * casb * sc
+    out[..., j] = casb * cc - p * sacb * sc
+    out[..., k] = cacb * sc + p * sasb * cc
+    out[..., 3] = cacb * cc - p * sasb * sc
+    return out
 
 
 def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
-    """Euler angles ``(..., 3)`` in ``order`` (see :func:`from_euler`) from quaternions."""
-    q = np.asarray(q, dtype=np.float64)
-    shape = q.shape[:-1]
-    r = Rotation.from_quat(normalize(q).reshape(-1, 4))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # gimbal lock is fine: any valid triple
-        e = r.as_euler(_scipy_order(order), degrees=degrees)
-    return e.reshape(shape + (3,))
+    """Euler angles ``(..., 3)`` in ``order`` (see :func:`from_euler`) from quaternions.
+
+    Plain numpy on the rotation matrix R = Ri(a) Rj(b) Rk(c): b from R[i, k], a and c
+    from the rest of row i and column k; at gimbal lock (|cos b| ~ 0) c is 0 and a takes
+    the whole turn about the shared axis.
+    """
+    m = to_matrix(q)
+    i, j, k = _axes(order)
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ
+    sin_b = sign * m[..., i, k]
+    cos_b = np.hypot(m[..., i, i], m[..., i, j])
+    b = np.arctan2(sin_b, cos_b)
+    locked = cos_b < 1e-9
+    a = np.where(
+        locked,
+        np.arctan2(sign * m[..., k, j], m[..., j, j]),
+        np.arctan2(-sign * m[..., j, k], m[..., k, k]),
+    )
+    c = np.where(locked, 0.0, np.arctan2(-sign * m[..., i, j], m[..., i, i]))
+    out = np.stack([a, b, c], axis=-1)
+    return np.rad2deg(out) if degrees else out
 
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)``."""
-    q = np.asarray(q, dtype=np.float64)
-    shape = q.shape[:-1]
-    return Rotation.from_quat(normalize(q).reshape(-1, 4)).as_matrix().reshape(shape + (3, 3))
+    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` (normalised first)."""
+    q = normalize(q)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
 
 
 def from_matrix(m: np.ndarray) -> np.ndarray:
