@@ -112,7 +112,7 @@ eval-translator: $(VENV)/.dev
 # translator pipeline, dance generation for a 3-minute song, the translator and dance
 # networks in onnxruntime vs torch eager, end-to-end HTTP latency (240/960/3,840 frames, cost
 # vs length, throughput at 1-8 clients) and the loopback load test. Not part of `make test`.
-.PHONY: bench quantize
+.PHONY: bench
 bench: $(VENV)/.dev
 	$(PY) -m bench.bench_motion
 	$(PY) -m bench.bench_fast
@@ -121,7 +121,3 @@ bench: $(VENV)/.dev
 	$(PY) -m bench.bench_networks
 	$(PY) -m bench.bench_http
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
-
-# Static int8 (QDQ, per-channel) fast and translator graphs vs fp32: speed, error, verdict (runs/quantize/).
-quantize: $(VENV)/.dev
-	$(PY) -m model_export.quantize
