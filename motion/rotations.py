@@ -101,13 +101,13 @@ def canonicalize(q: np.ndarray) -> np.ndarray:
 
 
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array."""
-    q = np.array(q, dtype=np.float64, copy=True)
-    q = np.moveaxis(q, axis, 0)
-    for i in range(1, q.shape[0]):
-        flip = np.sum(q[i] * q[i - 1], axis=-1) < 0
-        q[i][flip] *= -1
-    return np.moveaxis(q, 0, axis)
+    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array. Each
+    quaternion's sign is the product of the flips before it (a cumulative product, not a
+    loop over frames)."""
+    q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0)
+    flips = np.where(np.sum(q[1:] * q[:-1], axis=-1) < 0, -1.0, 1.0)
+    signs = np.concatenate([np.ones((1,) + flips.shape[1:]), np.cumprod(flips, axis=0)])
+    return np.moveaxis(q * signs[..., None], 0, axis)
 
 
 def angle(q: np.ndarray) -> np.ndarray:
