@@ -3,8 +3,7 @@
 Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
 Products, inverses, vector rotation, Euler angles and matrices are plain broadcasting
 numpy (they run in the inner loops of forward kinematics and of BVH reading and writing,
-where scipy's per-call cost dominated); matrices to quaternions and rotation vectors go
-through scipy.
+where scipy's per-call cost dominated); rotation vectors go through scipy.
 
 Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
 in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
@@ -194,10 +193,30 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def from_matrix(m: np.ndarray) -> np.ndarray:
-    """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``."""
+    """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``: Shepperd's
+    method in numpy (each from its largest of w, x, y, z, so no division by a small number);
+    a matrix that is not quite orthonormal gives the normalised nearest quaternion."""
     m = np.asarray(m, dtype=np.float64)
-    shape = m.shape[:-2]
-    return Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat().reshape(shape + (4,))
+    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
+    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    # 4 w^2, 4 x^2, 4 y^2, 4 z^2 (times the same scale); the largest picks the formula
+    squares = np.stack(
+        [1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22],
+        axis=-1,
+    )
+    best = np.argmax(squares, axis=-1)
+    candidates = np.stack(
+        [
+            np.stack([m21 - m12, m02 - m20, m10 - m01, squares[..., 0]], axis=-1),
+            np.stack([squares[..., 1], m01 + m10, m02 + m20, m21 - m12], axis=-1),
+            np.stack([m01 + m10, squares[..., 2], m12 + m21, m02 - m20], axis=-1),
+            np.stack([m02 + m20, m12 + m21, squares[..., 3], m10 - m01], axis=-1),
+        ],
+        axis=-2,
+    )
+    q = np.take_along_axis(candidates, best[..., None, None], axis=-2)[..., 0, :]
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def to_6d(q: np.ndarray) -> np.ndarray:

@@ -269,3 +269,15 @@ def test_euler_conversions_agree_with_scipy(order):
         rot.to_euler(q[40:], order), Rotation.from_quat(q[40:]).as_euler(order, degrees=True),
         atol=1e-8,
     )  # fmt: skip
+
+
+def test_matrix_to_quaternion_agrees_with_scipy_near_every_axis():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(5)
+    q = rot.normalize(rng.standard_normal((2000, 4)))
+    q[:4] = np.eye(4)  # 180-degree turns about x, y, z and the identity
+    m = Rotation.from_quat(q).as_matrix()
+    got = rot.from_matrix(m)
+    assert np.all(np.abs(np.sum(got * q, axis=-1)) > 1 - 1e-12)
+    np.testing.assert_allclose(rot.to_matrix(got), m, atol=1e-12)
