@@ -293,12 +293,17 @@ def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
     ``channels`` finite numbers. One ``np.fromstring`` reads all the numbers; the count of
     numbers on each line is checked on the bytes (a space followed by a non-space starts
-    one), so a line with a missing value and one with an extra value cannot cancel out."""
+    one), so a line with a missing value and one with an extra value cannot cancel out.
+    Plain decimals are read by :func:`_decimals`; anything it declines goes through
+    ``np.fromstring``, whose failure is then traced to its line."""
     data = np.frombuffer(block, dtype=np.uint8)
     space = data <= 32  # any other control byte is no number either: fromstring refuses it
     starts = np.flatnonzero(space[:-1] > space[1:]) + 1  # a space, then a non-space
+    ends = np.flatnonzero(space[1:] > space[:-1]) + 1  # a non-space, then a space
     if len(data) and not space[0]:
         starts = np.concatenate(([0], starts))
+    if len(data) and not space[-1]:
+        ends = np.concatenate((ends, [len(data)]))
     newlines = np.flatnonzero(data == 10)
     # numbers on each line: those that start before its newline and after the previous one
     before = np.searchsorted(starts, newlines)
@@ -315,13 +320,14 @@ def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     frames = len(filled)
     if channels == 0:  # nothing to read: a hierarchy without channels has no frames
         return np.zeros((0, 0))
-    values = None
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
-        try:
-            values = np.fromstring(block, dtype=np.float64, sep=" ")
-        except (DeprecationWarning, ValueError):
-            values = None
+    values = _decimals(data, block, starts, ends)
+    if values is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
+            try:
+                values = np.fromstring(block, dtype=np.float64, sep=" ")
+            except (DeprecationWarning, ValueError):
+                values = None
     if values is None or values.size != frames * channels:
         for i in filled:
             start = 0 if i == 0 else int(newlines[i - 1]) + 1
@@ -344,6 +350,60 @@ def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
         i = int(filled[np.flatnonzero((np.abs(values) > _MAX_ABS_VALUE).any(axis=1))[0]])
         raise MotionError(f"line {first_line + i}: a value is absurdly large", line=first_line + i)
     return values
+
+
+_POWERS = 10.0 ** np.arange(23)
+_MAX_DIGITS = 15  # below 2**53: a mantissa this long is an exact float
+
+
+def _decimals(
+    data: np.ndarray, block: bytes, starts: np.ndarray, ends: np.ndarray
+) -> np.ndarray | None:
+    """The numbers between ``starts`` and ``ends`` (byte offsets into ``data``, the bytes of
+    ``block``), read column by column over all of them at once: sign, digits and one point
+    give an integer mantissa M and f digits after the point, and M / 10**f is correctly
+    rounded (both exact), so each equals ``float()`` of its text. Tokens it does not read
+    (exponents, nan, more than 15 digits) are read by ``float()`` one by one while they
+    are few; None when they are many or one is no number (the caller falls back)."""
+    count = len(starts)
+    if count == 0:
+        return np.zeros(0)
+    first = data[starts]
+    negative = first == ord("-")
+    begin = starts + (negative | (first == ord("+")))
+    width = int((ends - begin).max())
+    if width > 2 * _MAX_DIGITS:
+        return None
+    padded = np.concatenate((data, np.full(width + 1, 32, np.uint8)))
+    mantissa = np.zeros(count, np.int64)
+    after_point = np.zeros(count, np.int64)
+    digits = np.zeros(count, np.int64)
+    seen_point = np.zeros(count, bool)
+    odd = np.zeros(count, bool)
+    for column in range(width):
+        at = begin + column
+        inside = at < ends
+        byte = padded.take(at)
+        value = byte - np.uint8(ord("0"))  # wraps around below "0": no digit
+        digit = (value < 10) & inside
+        point = (byte == ord(".")) & inside
+        odd |= (inside & ~(digit | point)) | (point & seen_point)
+        seen_point |= point
+        mantissa = np.where(digit, mantissa * 10 + value, mantissa)
+        after_point += digit & seen_point
+        digits += digit
+    odd |= (digits == 0) | (digits > _MAX_DIGITS)
+    out = mantissa / _POWERS[np.minimum(after_point, len(_POWERS) - 1)]
+    np.negative(out, out=out, where=negative)
+    rest = np.flatnonzero(odd)
+    if len(rest) > max(64, count // 20):
+        return None
+    try:
+        for i in rest:
+            out[i] = float(block[starts[i] : ends[i]])
+    except ValueError:
+        return None
+    return out
 
 
 def _line_of_row(block: bytes, row: int) -> int:

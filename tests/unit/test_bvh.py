@@ -281,3 +281,23 @@ def test_matrix_to_quaternion_agrees_with_scipy_near_every_axis():
     got = rot.from_matrix(m)
     assert np.all(np.abs(np.sum(got * q, axis=-1)) > 1 - 1e-12)
     np.testing.assert_allclose(rot.to_matrix(got), m, atol=1e-12)
+
+
+def test_decimal_reader_equals_float_of_each_token():
+    rng = np.random.default_rng(6)
+    tokens = [f"{v:.6f}" for v in rng.standard_normal(3000) * rng.choice([1e-3, 1, 1e3], 3000)]
+    tokens += [f"{v:g}" for v in rng.standard_normal(40) * 1e-5]  # Bandai writes 1.87007e-05
+    tokens += ["0", "-0.000000", "+3.25", "1.", ".5", "-.5", "123456789012345", "1234567890.123456789",
+               "1E3", "nan", "-inf", "007.50"]  # fmt: skip
+    block = (" ".join(tokens) + "\n").encode()
+    data = np.frombuffer(block, dtype=np.uint8)
+    space = data <= 32
+    starts = np.concatenate(([0], np.flatnonzero(space[:-1] > space[1:]) + 1))
+    ends = np.flatnonzero(space[1:] > space[:-1]) + 1
+    got = bvh._decimals(data, block, starts, ends)
+    want = np.array([float(t) for t in tokens])
+    np.testing.assert_array_equal(got, want)  # bit for bit, nan where nan
+    assert np.signbit(got[tokens.index("-0.000000")])
+    bad = b"1.0 2.0 1.0.0 3.0\n"
+    data = np.frombuffer(bad, dtype=np.uint8)
+    assert bvh._decimals(data, bad, np.array([0, 4, 8, 14]), np.array([3, 7, 13, 17])) is None
