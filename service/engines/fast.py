@@ -6,7 +6,7 @@ bundle's statistics) -> edge padding (``MARGIN`` frames each side, then up to a 
 of ``BUCKET`` frames, so onnxruntime sees few shapes and short clips still fill the
 receptive field) -> style network -> projection -> raw features -> global positions (the
 content's root trajectory, so the path is kept exactly) -> joint rotations by
-``motion.ik.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
+``motion.fit.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
 where the content's feet are planted (``motion.ik.pin_canonical_feet``).
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from motion import canonical as C
 from motion import fast_features as FF
-from motion import ik
+from motion import fit, ik
 from motion import kinematics as K
 from motion.skeleton import Motion
 from service.engines import register_engine
@@ -134,7 +134,7 @@ class FastEngine(Engine):
             gpos, _ = FF.decode(out, enc.start, enc.heading, fps=canon.fps)
             gpos[:, 0] = K.global_positions(canon.slice(0, 1))[0, 0]
         with timer.stage("ik"):
-            motion = ik.fit_positions(gpos, C.SKELETON, reference=canon, fps=canon.fps)
+            motion = fit.fit_positions(gpos, C.SKELETON, reference=canon, fps=canon.fps)
         if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
                 contacts = enc.features[:, FF.CONTACTS] > 0.5
