@@ -24,6 +24,8 @@ import asyncio
 import contextvars
 import functools
 import math
+import threading
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
@@ -35,7 +37,12 @@ T = TypeVar("T")
 
 
 class InferenceRunner:
-    """A bounded pool of inference threads behind a bounded queue; one per app."""
+    """A bounded pool of inference threads behind a bounded queue; one per app.
+
+    Slots are counted under a thread lock and handed to waiters in arrival order, each
+    waiter a future of its own event loop, so the runner works from any loop (the app's,
+    or a test client's per request) and a slot is passed on from the thread whose work
+    ended."""
 
     def __init__(
         self, max_concurrent: int, timeout_s: float, queue_wait_s: float, max_queued: int
@@ -44,16 +51,19 @@ class InferenceRunner:
         self.timeout_s = timeout_s
         self.queue_wait_s = queue_wait_s
         self.max_queued = max_queued
-        self.queued = 0  # waiting for a slot
         self.running = 0  # holding a slot (their work not yet ended)
+        self._free = max_concurrent
+        self._waiters: deque[tuple[asyncio.AbstractEventLoop, asyncio.Future]] = deque()
+        self._lock = threading.Lock()
         self._executor: ThreadPoolExecutor | None = None
-        self._slots: asyncio.Semaphore | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def queued(self) -> int:
+        """Requests waiting for a slot."""
+        return len(self._waiters)
 
     def start(self) -> None:
         self._executor = ThreadPoolExecutor(self.max_concurrent, thread_name_prefix="inference")
-        self._slots = asyncio.Semaphore(self.max_concurrent)
-        self._loop = asyncio.get_running_loop()
 
     def close(self) -> None:
         """Stop taking work; running calls finish on their own."""
@@ -70,55 +80,79 @@ class InferenceRunner:
         )
 
     async def _acquire(self) -> None:
-        assert self._slots is not None
-        if self.queued >= self.max_queued and self._slots.locked():
-            raise self._overloaded(
-                f"{self.queued} requests are already waiting for an inference slot "
-                f"(max_queued {self.max_queued})"
-            )
-        self.queued += 1
-        metrics.QUEUE_DEPTH.inc()
+        """A slot, waiting at most ``queue_wait_s`` behind at most ``max_queued`` others."""
+        loop = asyncio.get_running_loop()
+        with self._lock:
+            if self._free > 0 and not self._waiters:
+                self._free -= 1
+                self.running += 1
+                metrics.IN_FLIGHT.inc()
+                return
+            if len(self._waiters) >= self.max_queued:
+                raise self._overloaded(
+                    f"{len(self._waiters)} requests are already waiting for an inference slot "
+                    f"(max_queued {self.max_queued})"
+                )
+            waiter = loop.create_future()
+            self._waiters.append((loop, waiter))
+            metrics.QUEUE_DEPTH.inc()
         try:
-            await asyncio.wait_for(self._slots.acquire(), self.queue_wait_s)
-        except TimeoutError:
-            raise self._overloaded(
-                f"no inference slot freed within {self.queue_wait_s:g} s (queue_wait_s)"
-            ) from None
-        finally:
-            self.queued -= 1
-            metrics.QUEUE_DEPTH.dec()
+            await asyncio.wait_for(asyncio.shield(waiter), self.queue_wait_s)
+        except BaseException as exc:  # the wait ran out, or the request was cancelled
+            with self._lock:
+                still_waiting = (loop, waiter) in self._waiters
+                if still_waiting:
+                    self._waiters.remove((loop, waiter))
+                    metrics.QUEUE_DEPTH.dec()
+            if not still_waiting:  # granted meanwhile: the slot is ours
+                if isinstance(exc, TimeoutError):
+                    await waiter
+                    return
+                self._release()  # cancelled: pass it on
+                raise
+            if isinstance(exc, TimeoutError):
+                raise self._overloaded(
+                    f"no inference slot freed within {self.queue_wait_s:g} s (queue_wait_s)"
+                ) from None
+            raise
 
     def _release(self) -> None:
-        self.running -= 1
-        metrics.IN_FLIGHT.dec()
-        assert self._slots is not None
-        self._slots.release()
+        """Pass the slot to the first waiter, or free it (any thread)."""
+        with self._lock:
+            self.running -= 1
+            metrics.IN_FLIGHT.dec()
+            if not self._waiters:
+                self._free += 1
+                return
+            loop, waiter = self._waiters.popleft()
+            metrics.QUEUE_DEPTH.dec()
+            self.running += 1  # the waiter's, from now on
+            metrics.IN_FLIGHT.inc()
+
+        def grant() -> None:
+            if not waiter.done():
+                waiter.set_result(None)
+
+        try:
+            loop.call_soon_threadsafe(grant)
+        except RuntimeError:  # its loop has closed: nobody will use the slot
+            self._release()
 
     async def run(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> T:
         """``fn(*args, **kwargs)`` in an inference thread (with the caller's context, so log
         lines keep the request id): 503 :class:`Overloaded` when it cannot start in time,
         504 :class:`Timeout` when it runs past ``timeout_s``."""
-        if self._executor is None or self._loop is None:
+        if self._executor is None:
             raise NotReady("the inference pool is not running")
         await self._acquire()
-        self.running += 1
-        metrics.IN_FLIGHT.inc()
         context = contextvars.copy_context()
         try:
             future = self._executor.submit(context.run, functools.partial(fn, *args, **kwargs))
         except RuntimeError:  # shut down meanwhile
             self._release()
             raise NotReady("the inference pool is not running") from None
-        loop = self._loop
-
-        def release_when_done(_future: Any) -> None:
-            # the slot is freed when the work ends, not when its caller stops waiting
-            try:
-                loop.call_soon_threadsafe(self._release)
-            except RuntimeError:  # the loop has closed: nobody is left to wait for a slot
-                pass
-
-        future.add_done_callback(release_when_done)
+        # the slot is passed on when the work ends, not when its caller stops waiting
+        future.add_done_callback(lambda _: self._release())
         try:
             return await asyncio.wait_for(asyncio.wrap_future(future), self.timeout_s)
         except TimeoutError:

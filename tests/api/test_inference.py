@@ -184,3 +184,34 @@ def test_a_timed_out_call_keeps_its_slot_until_its_work_ends(make_client):
     wait_for(lambda: client.app.state.runner.running == 0)
     assert client.get("/_test/work", params={"seconds": 0}).status_code == 200
     assert work.peak == 1
+
+
+def test_the_runner_serves_any_event_loop_and_a_cancelled_wait_frees_its_place():
+    import asyncio
+
+    from service.inference import InferenceRunner
+
+    runner = InferenceRunner(1, timeout_s=5, queue_wait_s=5, max_queued=4)
+    runner.start()  # outside any loop, as a test harness without lifespan does
+    try:
+        assert asyncio.run(runner.run(sum, [1, 2])) == 3
+        assert asyncio.run(runner.run(sum, [3, 4])) == 7  # another loop
+
+        async def cancel_a_waiter() -> None:
+            gate = threading.Event()
+            holder = asyncio.ensure_future(runner.run(gate.wait, 5))
+            await asyncio.sleep(0.05)
+            waiter = asyncio.ensure_future(runner.run(sum, [1]))
+            await asyncio.sleep(0.05)
+            assert (runner.running, runner.queued) == (1, 1)
+            waiter.cancel()
+            await asyncio.sleep(0.05)
+            assert runner.queued == 0
+            gate.set()
+            await holder
+            assert await runner.run(sum, [5]) == 5  # the slot came back
+
+        asyncio.run(cancel_a_waiter())
+        assert (runner.running, runner.queued) == (0, 0)
+    finally:
+        runner.close()
