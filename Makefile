@@ -108,11 +108,14 @@ eval-translator: $(VENV)/.dev
 	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest --classifier-cache runs/eval/classifiers
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
-# BVH parse/write and retargeting, the fast networks in onnxruntime vs torch eager, the
-# translator pipeline, dance generation for a 3-minute song, the translator and dance
-# networks in onnxruntime vs torch eager, end-to-end HTTP latency (240/960/3,840 frames, cost
-# vs length, throughput at 1-8 clients) and the loopback load test. Not part of `make test`.
-.PHONY: bench quantize
+# BVH parse/write, retargeting and BVH reading against bvhio 1.5.4 on the same real files,
+# the fast networks in onnxruntime vs torch eager, the translator pipeline, dance generation
+# for a 3-minute song, the translator and dance networks in onnxruntime vs torch eager,
+# end-to-end HTTP latency (240/960/3,840 frames, end to end over the networks' own
+# Server-Timing, cost vs length, throughput at 1-8 clients), 48 clients sending a 3,840-frame
+# transfer at once (200 or 503 with Retry-After, peak RSS) and the loopback load test. Not
+# part of `make test`.
+.PHONY: bench
 bench: $(VENV)/.dev
 	$(PY) -m bench.bench_motion
 	$(PY) -m bench.bench_fast
@@ -120,11 +123,8 @@ bench: $(VENV)/.dev
 	$(PY) -m bench.bench_dance
 	$(PY) -m bench.bench_networks
 	$(PY) -m bench.bench_http
+	$(PY) -m bench.overload
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
-
-# Static int8 (QDQ, per-channel) fast and translator graphs vs fp32: speed, error, verdict (runs/quantize/).
-quantize: $(VENV)/.dev
-	$(PY) -m model_export.quantize
 
 # The Blender add-on as a zip Blender installs (Edit > Preferences > Add-ons > Install...).
 .PHONY: blender-addon

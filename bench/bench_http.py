@@ -54,7 +54,12 @@ CLIENTS = (1, 2, 4, 8)
 THROUGHPUT_FRAMES = 960
 FAMILIES = ("fast", "translator", "dance")
 FPS = 30.0
-TIMEOUT_S = 600.0  # the client's socket timeout; the server answers 504 after its own limit
+TIMEOUT_S = 600.0
+# Server-Timing stages that are the networks themselves (onnxruntime runs): the rest of a
+# request's time is parsing, retargeting, features, clean-up, writing and HTTP
+NETWORK_STAGES = frozenset(
+    {"encode", "decode", "network", "step"}
+)  # the client's socket timeout; the server answers 504 after its own limit
 
 
 @dataclass
@@ -151,6 +156,7 @@ class Client:
         self.host, self.port = host, port
         self.conn: http.client.HTTPConnection | None = None
         self.latencies_ms: list[float] = []
+        self.stages_ms: list[dict[str, float]] = []  # Server-Timing of each recorded answer
         self.errors: list[str] = []
         self.frames_out: str | None = None
 
@@ -173,12 +179,23 @@ class Client:
             )
         elif record:
             self.latencies_ms.append(elapsed)
+            self.stages_ms.append(server_timing(headers.get("server-timing", "")))
             self.frames_out = headers.get("x-frames", self.frames_out)
 
     def close(self) -> None:
         if self.conn is not None:
             self.conn.close()
             self.conn = None
+
+
+def server_timing(header: str) -> dict[str, float]:
+    """``{"decode": 12.3, ...}`` from a ``Server-Timing`` header (``name;dur=ms, ...``)."""
+    out = {}
+    for item in header.split(","):
+        name, _, rest = item.strip().partition(";")
+        if name and rest.startswith("dur="):
+            out[name] = float(rest[4:])
+    return out
 
 
 def get_json(host: str, port: int, path: str) -> dict:
@@ -228,6 +245,10 @@ def latency(host: str, port: int, case: Case, repeats: int) -> tuple[dict, list[
         client.close()
     ms = sorted(client.latencies_ms)
     p50 = percentile(ms, 50)
+    names = list(dict.fromkeys(k for stages in client.stages_ms for k in stages))
+    stages = {k: float(np.median([s.get(k, 0.0) for s in client.stages_ms])) for k in names}
+    network = sorted(sum(v for k, v in s.items() if k in NETWORK_STAGES) for s in client.stages_ms)
+    network_p50 = percentile(network, 50) if network else None
     row = {
         "family": case.family,
         "frames": case.frames,
@@ -236,6 +257,9 @@ def latency(host: str, port: int, case: Case, repeats: int) -> tuple[dict, list[
         "p50_ms": round(p50, 1) if ms else None,
         "p95_ms": round(percentile(ms, 95), 1) if ms else None,
         "ms_per_1000_frames": round(p50 / case.frames * 1000.0, 1) if ms else None,
+        "network_ms": round(network_p50, 1) if network_p50 else None,
+        "end_to_end_over_network": round(p50 / network_p50, 2) if ms and network_p50 else None,
+        "stages_ms": {k: round(v, 1) for k, v in stages.items()},
         "frames_out": int(client.frames_out) if client.frames_out else None,
         "upload_bytes": len(case.body),
         "input": case.what,
@@ -410,6 +434,21 @@ def main(argv: list[str] | None = None) -> dict:
             print(
                 f"| {r['family']} | {r['frames']} | {_ms(r['p50_ms'])} | {_ms(r['p95_ms'])} "
                 f"| {_ms(r['ms_per_1000_frames'])} |"
+            )
+        print(
+            "\nEnd to end (client p50) over the networks' own time (Server-Timing stages "
+            f"{', '.join(sorted(NETWORK_STAGES))}, median), measured in this run:"
+        )
+        print("\n| family | frames | p50 ms | networks ms | ratio | other stages (median ms) |")
+        print("|---|---:|---:|---:|---:|---|")
+        for r in rows:
+            other = ", ".join(
+                f"{k} {v:.0f}" for k, v in r["stages_ms"].items() if k not in NETWORK_STAGES
+            )
+            ratio = r["end_to_end_over_network"]
+            print(
+                f"| {r['family']} | {r['frames']} | {_ms(r['p50_ms'])} | {_ms(r['network_ms'])} "
+                f"| {'-' if ratio is None else f'{ratio:.2f}'} | {other} |"
             )
         for family, g in report["growth"].items():
             print(

@@ -3,7 +3,7 @@ second for a 240-frame clip, and the median milliseconds of every stage.
 
     python -m bench.bench_translator [--frames 240] [--repeats 10] [--json]
 
-One run = what ``POST /v1/transfer`` does after reading the upload: parse the BVH -> map
+One run = what ``POST /v1/transfer`` does in the inference pool (``engine.infer``): parse the BVH -> map
 and retarget to the canonical skeleton at 30 fps -> features -> content encoder and the
 content's own style code -> decoder -> root trajectory -> foot clean-up (IK) -> time warp
 (canonical result and the clip as sent) -> retarget back -> write BVH. Rows: a style by
@@ -41,12 +41,10 @@ def content_clip(frames: int, data_dir: Path) -> tuple[str, bytes]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    from service import pipeline
     from service.config import Settings
-    from service.engines.translator import TranslatorEngine
+    from service.engines.translator import StyleSource, TransferRequest, TranslatorEngine
     from service.manifest import load_manifest
-    from service.metrics import StageTimer
-    from service.routes.transfer import StyleInput, finish_transfer, style_code
+    from service.pipeline import Upload
     from tests.conftest import DATA_DIR
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -64,27 +62,19 @@ def main(argv: list[str] | None = None) -> dict:
     name = args.style_name or engine.style_names[0]
     what, data = content_clip(args.frames, DATA_DIR)
     style_file = DATA_DIR / "bandai" / "dataset-1" / "dataset-1_run_tired_001.bvh"
-    inputs = {"style_name": StyleInput("style_name", name=name)}
+    inputs = {"style_name": StyleSource("style_name", name=name)}
     if style_file.exists():
-        inputs["style_clip"] = StyleInput("style", data=style_file.read_bytes())
+        inputs["style_clip"] = StyleSource(
+            "style", upload=Upload("style", data=style_file.read_bytes())
+        )
 
     rows = {}
     for label, style in inputs.items():
 
         def once(style=style) -> tuple[float, dict, int]:
             started = time.perf_counter()
-            timer = StageTimer(engine.name)
-            clip = pipeline.load_clip(data, settings, timer)
-            target = style_code(engine, settings, style, timer)
-            result = engine.transfer(
-                clip.canonical,
-                target.code,
-                style_velocity=target.velocity,
-                style_speed=target.speed,
-                timer=timer,
-            )
-            out = finish_transfer(clip, result, settings, timer, target.warnings)
-            return time.perf_counter() - started, dict(timer.ms), out.frames
+            out = engine.infer(TransferRequest(Upload("content", data=data), style))
+            return time.perf_counter() - started, dict(out.timer.ms), out.frames
 
         once()  # warm-up: the bucket's shapes
         runs = [once() for _ in range(args.repeats)]

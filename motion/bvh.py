@@ -39,20 +39,39 @@ def load(path: str | os.PathLike) -> Motion:
 
 
 def loads(data: str | bytes) -> Motion:
-    """Parse BVH text (``str`` or ``bytes``)."""
-    if isinstance(data, bytes | bytearray | memoryview):
-        data = _decode(bytes(data))
-    if "\x00" in data:
+    """Parse BVH text (``str`` or ``bytes``).
+
+    The hierarchy is read line by line; the motion block is read as one array
+    (``np.fromstring`` over the whole block, its line structure checked on the bytes), so
+    the cost is that of numpy's number parsing, not of a Python loop over frames.
+    """
+    raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    if b"\x00" in raw:
         raise MotionError("not a BVH file: it contains binary data")
-    lines = data.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    if b"\n" not in raw:
+        raw = raw.replace(b"\r", b"\n")  # classic Mac line endings
+    header_end = _motion_keyword_end(raw)
+    lines = _decode(raw[:header_end]).replace("\r", "").split("\n")
     skeleton, motion_line = _parse_hierarchy(lines)
-    fps, values = _parse_motion(lines, motion_line, skeleton)
+    if header_end == len(raw):  # no MOTION line: the hierarchy parser has named the problem
+        raise MotionError("unexpected end of file: expected 'MOTION'", line=len(lines))
+    fps, values = _parse_motion(raw, header_end, len(lines), skeleton)
     return _to_motion(skeleton, fps, values)
 
 
+_MOTION_KEYWORD = re.compile(rb"^[ \t]*MOTION[ \t\r]*$", re.MULTILINE | re.IGNORECASE)
+
+
+def _motion_keyword_end(raw: bytes) -> int:
+    """Offset just past the ``MOTION`` line (before its newline), or ``len(raw)`` if none.
+    A joint cannot be named so as to match: its line starts with ``JOINT``."""
+    match = _MOTION_KEYWORD.search(raw)
+    return len(raw) if match is None else match.end()
+
+
 def _decode(raw: bytes) -> str:
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -207,8 +226,30 @@ def _end_site_parent(stack: list[int | None]) -> int:
     raise MotionError("End Site outside a joint")
 
 
-def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[float, np.ndarray]:
-    src = _Lines(lines, start)
+class _ByteLines:
+    """Non-empty stripped lines of ``raw`` from byte offset ``pos``, with 1-based numbers
+    (``line`` is the number of the line ``pos`` lies on)."""
+
+    def __init__(self, raw: bytes, pos: int, line: int) -> None:
+        self.raw, self.pos, self.line = raw, pos, line
+
+    def next(self, what: str) -> tuple[int, str]:
+        while self.pos < len(self.raw):
+            stop = self.raw.find(b"\n", self.pos)
+            stop = len(self.raw) if stop < 0 else stop
+            text = self.raw[self.pos : stop].strip()
+            if self.pos > 0 and self.raw[self.pos - 1 : self.pos] == b"\n":
+                self.line += 1
+            self.pos = stop + 1
+            if text:
+                return self.line, _decode(text)
+        raise MotionError(f"unexpected end of file: expected {what}", line=self.line)
+
+
+def _parse_motion(raw: bytes, pos: int, line: int, skeleton: Skeleton) -> tuple[float, np.ndarray]:
+    """The frame rate and the channel values ``(F, C)`` of the motion section, which starts
+    after byte ``pos`` (the end of the ``MOTION`` line, line number ``line``)."""
+    src = _ByteLines(raw, pos, line)
     n, text = src.next("'Frames:'")
     m = _FRAMES_RE.match(text)
     if not m:
@@ -233,73 +274,173 @@ def _parse_motion(lines: list[str], start: int, skeleton: Skeleton) -> tuple[flo
         raise MotionError(f"line {n}: frame time {m.group(1)!r} is not a number", line=n) from None
     if not math.isfinite(frame_time) or not _MIN_FRAME_TIME <= frame_time <= 10:
         raise MotionError(f"line {n}: frame time {frame_time} s is not usable", line=n)
-    num_channels = sum(len(c) for c in skeleton.channels)
-    first = src.i
-    rows = lines[first:]
-    counts = [len(r.split()) for r in rows]
-    while counts and counts[-1] == 0:  # trailing blank lines
-        counts.pop()
-    bad = [i for i, c in enumerate(counts) if c != num_channels]
-    if bad:
-        i = bad[0]
-        raise MotionError(
-            f"line {first + i + 1}: frame has {counts[i]} values, the hierarchy needs {num_channels}",
-            line=first + i + 1,
-        )
-    frames = len(counts)
+    channels = sum(len(c) for c in skeleton.channels)
+    block = raw[src.pos :]
+    values = _read_block(block, channels, first_line=n + 1)
+    frames = len(values)
     if frames == 0:
         raise MotionError(f"line {n}: the file has no frames", line=n)
     if frames < declared:
+        last = n + 1 + _line_of_row(block, frames - 1)
         raise MotionError(
-            f"line {first + frames}: file ends after {frames} frames, header says {declared}",
-            line=first + frames,
+            f"line {last}: file ends after {frames} frames, header says {declared}", line=last
         )
-    values = None
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
-        try:
-            values = np.fromstring(" ".join(rows[:frames]), dtype=np.float64, sep=" ")
-        except (DeprecationWarning, ValueError):
-            values = None
-    if values is None or values.size != frames * num_channels:
-        for i, r in enumerate(rows[:frames]):
-            try:
-                [float(t) for t in r.split()]
-            except ValueError:
-                raise MotionError(
-                    f"line {first + i + 1}: a value is not a number", line=first + i + 1
-                ) from None
-        raise MotionError(
-            f"line {first + 1}: the frames could not be read as numbers", line=first + 1
-        )
-    values = values.reshape(frames, num_channels)
-    if not np.isfinite(values).all():
-        i = int(np.nonzero(~np.isfinite(values).all(axis=1))[0][0])
-        raise MotionError(f"line {first + i + 1}: a value is not finite", line=first + i + 1)
-    if np.abs(values).max(initial=0.0) > _MAX_ABS_VALUE:
-        i = int(np.nonzero((np.abs(values) > _MAX_ABS_VALUE).any(axis=1))[0][0])
-        raise MotionError(f"line {first + i + 1}: a value is absurdly large", line=first + i + 1)
     return 1.0 / frame_time, values
 
 
+def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
+    """The motion block ``block`` (bytes after the ``Frame Time`` line, whose first line is
+    ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
+    ``channels`` finite numbers. One ``np.fromstring`` reads all the numbers; the count of
+    numbers on each line is checked on the bytes (a space followed by a non-space starts
+    one), so a line with a missing value and one with an extra value cannot cancel out.
+    Plain decimals are read by :func:`_decimals`; anything it declines goes through
+    ``np.fromstring``, whose failure is then traced to its line."""
+    data = np.frombuffer(block, dtype=np.uint8)
+    space = data <= 32  # any other control byte is no number either: fromstring refuses it
+    starts = np.flatnonzero(space[:-1] > space[1:]) + 1  # a space, then a non-space
+    ends = np.flatnonzero(space[1:] > space[:-1]) + 1  # a non-space, then a space
+    if len(data) and not space[0]:
+        starts = np.concatenate(([0], starts))
+    if len(data) and not space[-1]:
+        ends = np.concatenate((ends, [len(data)]))
+    newlines = np.flatnonzero(data == 10)
+    # numbers on each line: those that start before its newline and after the previous one
+    before = np.searchsorted(starts, newlines)
+    per_line = np.diff(np.concatenate(([0], before, [len(starts)])))
+    filled = np.flatnonzero(per_line)
+    wrong = filled[per_line[filled] != channels]
+    if len(wrong):
+        i = int(wrong[0])
+        raise MotionError(
+            f"line {first_line + i}: frame has {per_line[i]} values, the hierarchy needs "
+            f"{channels}",
+            line=first_line + i,
+        )
+    frames = len(filled)
+    if channels == 0:  # nothing to read: a hierarchy without channels has no frames
+        return np.zeros((0, 0))
+    values = _decimals(data, block, starts, ends)
+    if values is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
+            try:
+                values = np.fromstring(block, dtype=np.float64, sep=" ")
+            except (DeprecationWarning, ValueError):
+                values = None
+    if values is None or values.size != frames * channels:
+        for i in filled:
+            start = 0 if i == 0 else int(newlines[i - 1]) + 1
+            stop = int(newlines[i]) if i < len(newlines) else len(block)
+            try:
+                [float(t) for t in block[start:stop].split()]
+            except ValueError:
+                raise MotionError(
+                    f"line {first_line + i}: a value is not a number", line=first_line + i
+                ) from None
+        raise MotionError(
+            f"line {first_line}: the frames could not be read as numbers", line=first_line
+        )
+    values = values.reshape(frames, channels)
+    finite = np.isfinite(values)
+    if not finite.all():
+        i = int(filled[np.flatnonzero(~finite.all(axis=1))[0]])
+        raise MotionError(f"line {first_line + i}: a value is not finite", line=first_line + i)
+    if np.abs(values).max(initial=0.0) > _MAX_ABS_VALUE:
+        i = int(filled[np.flatnonzero((np.abs(values) > _MAX_ABS_VALUE).any(axis=1))[0]])
+        raise MotionError(f"line {first_line + i}: a value is absurdly large", line=first_line + i)
+    return values
+
+
+_POWERS = 10.0 ** np.arange(23)
+_MAX_DIGITS = 15  # below 2**53: a mantissa this long is an exact float
+
+
+def _decimals(
+    data: np.ndarray, block: bytes, starts: np.ndarray, ends: np.ndarray
+) -> np.ndarray | None:
+    """The numbers between ``starts`` and ``ends`` (byte offsets into ``data``, the bytes of
+    ``block``), read column by column over all of them at once: sign, digits and one point
+    give an integer mantissa M and f digits after the point, and M / 10**f is correctly
+    rounded (both exact), so each equals ``float()`` of its text. Tokens it does not read
+    (exponents, nan, more than 15 digits) are read by ``float()`` one by one while they
+    are few; None when they are many or one is no number (the caller falls back)."""
+    count = len(starts)
+    if count == 0:
+        return np.zeros(0)
+    first = data[starts]
+    negative = first == ord("-")
+    begin = starts + (negative | (first == ord("+")))
+    width = int((ends - begin).max())
+    if width > 2 * _MAX_DIGITS:
+        return None
+    padded = np.concatenate((data, np.full(width + 1, 32, np.uint8)))
+    mantissa = np.zeros(count, np.int64)
+    after_point = np.zeros(count, np.int64)
+    digits = np.zeros(count, np.int64)
+    seen_point = np.zeros(count, bool)
+    odd = np.zeros(count, bool)
+    for column in range(width):
+        at = begin + column
+        inside = at < ends
+        byte = padded.take(at)
+        value = byte - np.uint8(ord("0"))  # wraps around below "0": no digit
+        digit = (value < 10) & inside
+        point = (byte == ord(".")) & inside
+        odd |= (inside & ~(digit | point)) | (point & seen_point)
+        seen_point |= point
+        mantissa = np.where(digit, mantissa * 10 + value, mantissa)
+        after_point += digit & seen_point
+        digits += digit
+    odd |= (digits == 0) | (digits > _MAX_DIGITS)
+    out = mantissa / _POWERS[np.minimum(after_point, len(_POWERS) - 1)]
+    np.negative(out, out=out, where=negative)
+    rest = np.flatnonzero(odd)
+    if len(rest) > max(64, count // 20):
+        return None
+    try:
+        for i in rest:
+            out[i] = float(block[starts[i] : ends[i]])
+    except ValueError:
+        return None
+    return out
+
+
+def _line_of_row(block: bytes, row: int) -> int:
+    """0-based line (within ``block``) of its ``row``-th non-blank line."""
+    seen = -1
+    for i, text in enumerate(block.split(b"\n")):
+        if text.strip():
+            seen += 1
+            if seen == row:
+                return i
+    return 0
+
+
 def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
+    """Channel values ``(F, C)`` -> a motion: position channels replace offsets, rotation
+    channels become quaternions, one conversion per Euler order (not per joint)."""
     frames = values.shape[0]
-    lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
-    euler = np.zeros((frames, skeleton.num_joints, 3))
+    pos_cols, pos_joint, pos_axis = [], [], []
+    rot_cols, rot_joint, rot_slot = [], [], []
     col = 0
     for j, chans in enumerate(skeleton.channels):
         order = skeleton.rotation_order(j)
         for c in chans:
             if c in POSITION_CHANNELS:
-                lpos[:, j, "XYZ".index(c[0])] = values[:, col]
+                pos_cols.append(col), pos_joint.append(j), pos_axis.append("XYZ".index(c[0]))
             else:
-                euler[:, j, order.index(c[0])] = values[:, col]
+                rot_cols.append(col), rot_joint.append(j), rot_slot.append(order.index(c[0]))
             col += 1
+    lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
+    lpos[:, pos_joint, pos_axis] = values[:, pos_cols]
+    euler = np.zeros((frames, skeleton.num_joints, 3))
+    euler[:, rot_joint, rot_slot] = values[:, rot_cols]
     lrot = np.empty((frames, skeleton.num_joints, 4))
     orders: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
         orders.setdefault(skeleton.rotation_order(j), []).append(j)
-    for order, joints in orders.items():  # one scipy call per Euler order, not per joint
+    for order, joints in orders.items():
         lrot[:, joints] = rotations.from_euler(euler[:, joints], order)
     return Motion(skeleton, fps, lrot, lpos)
 
@@ -350,10 +491,54 @@ def _motion_block(motion: Motion) -> str:
                 cols.append(euler[:, order.index(c[0])])
     if not cols:
         return "\n" * motion.num_frames
-    data = np.stack(cols, axis=1)
-    buf = io.StringIO()
-    np.savetxt(buf, data, fmt="%.6f", delimiter=" ")
-    return buf.getvalue()
+    return format_fixed(np.stack(cols, axis=1))
+
+
+_DIGITS3 = np.array([list(f"{i:03d}".encode()) for i in range(1000)], dtype=np.uint8)
+_POW10 = 10 ** np.arange(19, dtype=np.int64)
+_FIXED_LIMIT = 1e12  # beyond this (never motion) the text goes through printf
+
+
+def format_fixed(values: np.ndarray) -> str:
+    """Rows of ``values (F, C)`` as text, ``%.6f`` numbers separated by spaces, one row a
+    line. Built as one byte array (digits looked up three at a time, then the unused
+    leading cells dropped), not by formatting each number in Python: the same text as
+    ``np.savetxt(fmt="%.6f")`` but for ties at the seventh decimal and ``-0.000000``,
+    written ``0.000000``."""
+    values = np.asarray(values, dtype=np.float64)
+    frames, channels = values.shape
+    if not np.isfinite(values).all() or np.abs(values).max(initial=0.0) >= _FIXED_LIMIT:
+        buf = io.StringIO()
+        np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
+        return buf.getvalue()
+    scaled = np.rint(values.ravel() * 1e6).astype(np.int64)
+    negative = scaled < 0
+    magnitude = np.abs(scaled)
+    whole = magnitude // 1_000_000
+    fraction = magnitude - whole * 1_000_000
+    groups = max(1, -(-len(str(int(whole.max(initial=0)))) // 3))
+    width = 1 + 3 * groups + 1 + 6 + 1  # sign, whole part, point, fraction, separator
+    cells = np.empty((len(scaled), width), dtype=np.uint8)
+    cells[:, 0] = ord("-")
+    rest = whole
+    for g in range(groups):  # three digits of the whole part at a time, units first
+        group = rest % 1000
+        rest = rest // 1000
+        stop = 1 + 3 * (groups - g)
+        cells[:, stop - 3 : stop] = np.take(_DIGITS3, group, axis=0)
+    cells[:, 1 + 3 * groups] = ord(".")
+    high = fraction // 1000
+    cells[:, 2 + 3 * groups : 5 + 3 * groups] = np.take(_DIGITS3, high, axis=0)
+    cells[:, 5 + 3 * groups : 8 + 3 * groups] = np.take(_DIGITS3, fraction - high * 1000, axis=0)
+    cells[:, -1] = ord(" ")
+    cells.reshape(frames, channels, width)[:, -1, -1] = ord("\n")
+    keep = np.ones(cells.shape, dtype=bool)
+    keep[:, 0] = negative
+    # a whole-part digit is written where the number reaches its place (units always)
+    places = _POW10[3 * groups - 1 :: -1].copy()
+    places[-1] = 0
+    keep[:, 1 : 1 + 3 * groups] = whole[:, None] >= places
+    return cells[keep].tobytes().decode("ascii")
 
 
 def save(motion: Motion, path: str | os.PathLike) -> None:

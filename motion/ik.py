@@ -1,4 +1,5 @@
-"""Inverse kinematics: two-bone leg IK, foot-contact clean-up, fitting rotations to positions.
+"""Inverse kinematics: two-bone leg IK and foot-contact clean-up (fitting rotations to
+positions is :mod:`motion.fit`).
 
 Quaternions are (x, y, z, w) as in :mod:`motion.rotations`; positions ``(F, J, 3)``,
 Y up. Everything is vectorised over frames and loops over joints, legs or contact
@@ -14,10 +15,9 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from motion import canonical as C
 from motion import contacts as CT
-from motion import kinematics as K
 from motion import rotations as rot
 from motion.errors import MotionError
-from motion.skeleton import Motion, Skeleton
+from motion.skeleton import Motion
 
 # Below this bend (sine of the knee's offset angle from the hip-ankle line, ~0.06
 # degrees) the pole takes over from the current bend direction; above it an unmoved
@@ -152,6 +152,33 @@ def two_bone_ik(
 
 
 # --------------------------------------------------------------------------- feet
+
+
+def _fk_of(
+    lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray, joints: list[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`kinematics.fk` ``(F, J, 4)``, ``(F, J, 3)`` for ``joints`` and their ancestors
+    only (the others left zero): the foot clean-up needs the legs, not the arms and head,
+    and full FK had been most of its time."""
+    needed: set[int] = set()
+    for j in joints:
+        while j >= 0 and j not in needed:
+            needed.add(j)
+            j = int(parents[j])
+    grot = np.zeros(lrot.shape)
+    gpos = np.zeros(lpos.shape)
+    for j in sorted(needed):
+        p = int(parents[j])
+        if p < 0:
+            grot[:, j], gpos[:, j] = lrot[:, j], lpos[:, j]
+        else:
+            gpos[:, j] = rot.apply(grot[:, p], lpos[:, j]) + gpos[:, p]
+            grot[:, j] = rot.mul(grot[:, p], lrot[:, j])
+    return grot, gpos
+
+
+def _leg_joints(legs: list[tuple[int, int, int, int | None]]) -> list[int]:
+    return [j for leg in legs for j in leg if j is not None]
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -351,7 +378,7 @@ def pin_feet(
             raise MotionError(f"toe contacts must be {contacts.shape}, got {toe_contacts.shape}")
     blend = int(round(BLEND_SECONDS * motion.fps)) if blend_frames is None else int(blend_frames)
     parents = motion.skeleton.parents
-    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(legs))
     lrot = motion.lrot.copy()
     if hold_flat_feet and toe_contacts is not None:
         for i, (_, _, ankle, _) in enumerate(legs):
@@ -360,7 +387,7 @@ def pin_feet(
                 held = _held_rotations(grot[:, ankle], flat, blend)
                 local = rot.mul(rot.inv(grot[:, int(parents[ankle])]), held)
                 lrot[:, ankle] = np.where(_dot(local, lrot[:, ankle]) < 0, -local, local)
-        grot, gpos = K.fk(lrot, motion.lpos, parents)
+        grot, gpos = _fk_of(lrot, motion.lpos, parents, _leg_joints(legs))
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
@@ -440,7 +467,8 @@ def pin_canonical_feet(
                 f"the floor's motion has {floor_of.num_frames} frames, not {motion.num_frames}"
             )
         feet = CT.CANONICAL_FOOT_JOINTS
-        found = CT.ground_heights(K.global_positions(floor_of), feet, C.leg_length())
+        gpos = _fk_of(floor_of.lrot, floor_of.lpos, floor_of.skeleton.parents, list(feet))[1]
+        found = CT.ground_heights(gpos, feet, C.leg_length())
         levels = dict(zip(feet, found.tolist(), strict=True))
         motion = ground_hips(motion, contacts, levels, C.INDEX["Hips"])
     pinned = pin_feet(
@@ -473,7 +501,7 @@ def lift_toes(
             f"toe contacts must be ({motion.num_frames}, {len(legs)}), got {toe_contacts.shape}"
         )
     parents = motion.skeleton.parents
-    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(legs))
     lrot = motion.lrot.copy()
     up = np.array([0.0, 1.0, 0.0])
     for i, (_, _, ankle, toe) in enumerate(legs):
@@ -525,7 +553,8 @@ def ground_hips(
     held = contacts.any(axis=1)
     if not held.any():
         return motion
-    gap = np.array([levels[j] for j in feet])[None] - K.global_positions(motion)[:, feet, 1]
+    gpos = _fk_of(motion.lrot, motion.lpos, motion.skeleton.parents, feet)[1]
+    gap = np.array([levels[j] for j in feet])[None] - gpos[:, feet, 1]
     frames = np.arange(motion.num_frames)
     lowest = np.where(contacts, gap, -np.inf).max(axis=1)
     shift = np.interp(frames, frames[held], lowest[held])
@@ -533,175 +562,3 @@ def ground_hips(
     lpos = motion.lpos.copy()
     lpos[:, hips, 1] += shift
     return motion.replace(lpos=lpos)
-
-
-# --------------------------------------------------------------------------- positions
-
-
-def _translated_joints(skeleton: Skeleton) -> list[int]:
-    """Joints whose translation follows the target: the root, and children of the root
-    with position channels (the canonical Hips under its floor root)."""
-    return [0] + [c for c in skeleton.children(0) if skeleton.has_position(c)]
-
-
-def _bones(skeleton: Skeleton, translated: list[int]) -> list[list[tuple[int, list[int]]]]:
-    """For each joint, the bones its rotation aims: ``(descendant, zero-length joints
-    between)``. A child with a zero offset passes its own children up, so a CMU pelvis
-    (three zero-offset children) still sees its legs and spine."""
-    lengths = np.linalg.norm(skeleton.offsets, axis=-1)
-    tiny = 1e-9 * max(float(lengths.max()), 1e-9)
-    out: list[list[tuple[int, list[int]]]] = []
-    for j in range(skeleton.num_joints):
-        bones: list[tuple[int, list[int]]] = []
-        stack = [(c, []) for c in skeleton.children(j) if c not in translated]
-        while stack:
-            c, between = stack.pop(0)
-            if lengths[c] > tiny:
-                bones.append((c, between))
-            else:
-                stack.extend((g, between + [c]) for g in skeleton.children(c))
-        out.append(bones)
-    return out
-
-
-def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations ``(F, 4)`` minimising ``sum_k |R a_k - b_k|^2`` for ``a, b (F, K, 3)``
-    (about the origin), and whether each was well determined ``(F,)`` (not all
-    ``a_k`` on one line)."""
-    h = np.einsum("fki,fkj->fij", a, b)
-    u, s, vt = np.linalg.svd(h)
-    v = np.swapaxes(vt, -1, -2)
-    flip = np.sign(np.linalg.det(v @ np.swapaxes(u, -1, -2)))
-    flip = np.where(flip == 0, 1.0, flip)
-    d = np.ones(s.shape)
-    d[:, 2] = flip
-    m = (v * d[:, None, :]) @ np.swapaxes(u, -1, -2)
-    ok = s[:, 1] > 1e-6 * np.maximum(s[:, 0], 1e-300)
-    return rot.from_matrix(m), ok
-
-
-def _fit_pass(
-    targets: np.ndarray, skeleton: Skeleton, lrot_init: np.ndarray, translated: list[int]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One top-down pass: each joint's rotation aims its bones at the target positions
-    from where its parent put it. Returns ``lrot, grot (F, J, 4)``, ``gpos (F, J, 3)``."""
-    frames, joints = targets.shape[:2]
-    parents = skeleton.parents
-    lrot = lrot_init.copy()
-    grot = np.empty((frames, joints, 4))
-    gpos = np.empty((frames, joints, 3))
-    for j, bones in enumerate(_bones(skeleton, translated)):
-        p = int(parents[j])
-        parent_rot = rot.identity((frames,)) if p < 0 else grot[:, p]
-        if j in translated:
-            gpos[:, j] = targets[:, j]
-        else:
-            gpos[:, j] = gpos[:, p] + rot.apply(parent_rot, skeleton.offsets[j])
-        g = rot.mul(parent_rot, lrot_init[:, j])
-        if bones:
-            rest = []
-            for d, between in bones:
-                chain = rot.identity((frames,))
-                for k in between:
-                    chain = rot.mul(chain, lrot_init[:, k])
-                rest.append(rot.apply(rot.mul(g, chain), skeleton.offsets[d]))
-            now = np.stack(rest, axis=1)
-            wanted = targets[:, [d for d, _ in bones]] - gpos[:, j, None]
-            # the shortest swing of the summed bone: exact for one bone, the fallback
-            # for bones all on one line; several bones fix the twist too
-            swing = rot.between(now.sum(axis=1), wanted.sum(axis=1))
-            if len(bones) > 1:
-                turn, ok = _kabsch(now, wanted)
-                swing = np.where(ok[:, None], turn, swing)
-            g = rot.mul(swing, g)
-        grot[:, j] = g
-        lrot[:, j] = rot.mul(rot.inv(parent_rot), g)
-    return lrot, grot, gpos
-
-
-def _subtrees(skeleton: Skeleton, translated: list[int]) -> list[list[int]]:
-    """Descendants of each joint that move rigidly with it (translated joints excluded)."""
-    below: list[list[int]] = [[] for _ in range(skeleton.num_joints)]
-    for j in range(skeleton.num_joints - 1, 0, -1):
-        if j in translated:
-            continue
-        p = int(skeleton.parents[j])
-        below[p] = [j] + below[j] + below[p]
-    return below
-
-
-def _refine(
-    gpos: np.ndarray, targets: np.ndarray, skeleton: Skeleton, translated: list[int]
-) -> np.ndarray:
-    """One top-down sweep of block coordinate descent on positions: each joint turns
-    its subtree rigidly about itself to best match the targets (bone lengths kept)."""
-    gpos = gpos.copy()
-    for j, sub in enumerate(_subtrees(skeleton, translated)):
-        if not sub:
-            continue
-        now = gpos[:, sub] - gpos[:, j, None]
-        turn, _ = _kabsch(now, targets[:, sub] - gpos[:, j, None])
-        gpos[:, sub] = gpos[:, j, None] + rot.apply(turn[:, None], now)
-    return gpos
-
-
-def fit_positions(
-    target_gpos: np.ndarray,
-    skeleton: Skeleton,
-    reference: Motion | None = None,
-    iterations: int = 2,
-    fps: float | None = None,
-) -> Motion:
-    """A motion on ``skeleton`` whose joints follow ``target_gpos (F, J, 3)``.
-
-    Bone lengths are the skeleton's, exactly; positions are matched as well as rigid
-    bones allow. The root (and a root child with position channels, e.g. the canonical
-    Hips) takes its translation from the target. Going down the hierarchy, each joint
-    turns by the shortest swing that aims its bone at the target, or, with several
-    bones (pelvis, chest), by the rotation that best aligns them all (Kabsch). Twist
-    comes from ``reference``'s local rotations when given (it must have the same
-    skeleton and frame count), else it is zero relative to the rest pose; joints without
-    bones (leaves) keep the reference's rotation or the identity. ``iterations`` sweeps
-    of rigid subtree alignment refine the positions of noisy targets before the final
-    pass. ``fps`` defaults to the reference's, else the canonical 30.
-    """
-    target_gpos = np.asarray(target_gpos, dtype=np.float64)
-    joints = skeleton.num_joints
-    if target_gpos.ndim != 3 or target_gpos.shape[1:] != (joints, 3):
-        raise MotionError(
-            f"target positions must be (frames, {joints}, 3), got {target_gpos.shape}"
-        )
-    if not np.all(np.isfinite(target_gpos)):
-        raise MotionError("target positions contain NaN or infinity")
-    frames = len(target_gpos)
-    if frames == 0:
-        raise MotionError("target positions have no frames")
-    if reference is not None:
-        if reference.skeleton.num_joints != joints or reference.num_frames != frames:
-            raise MotionError("reference motion must have the same joints and frame count")
-        lrot_init = rot.normalize(reference.lrot)
-        fps = reference.fps if fps is None else fps
-    else:
-        lrot_init = rot.identity((frames, joints))
-    fps = C.FPS if fps is None else float(fps)
-    translated = _translated_joints(skeleton)
-
-    lrot, grot, gpos = _fit_pass(target_gpos, skeleton, lrot_init, translated)
-    if iterations > 0:
-        for _ in range(iterations):
-            gpos = _refine(gpos, target_gpos, skeleton, translated)
-        lrot, grot, gpos = _fit_pass(gpos, skeleton, lrot_init, translated)
-
-    lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
-    for j in translated:
-        p = int(skeleton.parents[j])
-        lpos[:, j] = (
-            target_gpos[:, j]
-            if p < 0
-            else rot.apply(rot.inv(grot[:, p]), target_gpos[:, j] - gpos[:, p])
-        )
-    if reference is not None:
-        lrot = np.where(_dot(lrot, reference.lrot) < 0, -lrot, lrot)
-    else:
-        lrot = rot.make_continuous(lrot)
-    return Motion(skeleton, fps, lrot, lpos)

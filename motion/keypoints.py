@@ -26,6 +26,9 @@ Conventions and choices, stated once:
 - Joints the layout does not observe (Spine, Chest, Shoulder_L/R, joint_Root; Toes for
   COCO layouts) are derived, see ``_derive``; their confidence is 0 and
   ``Keypoints2D.observed`` is False for them.
+
+One module though long: reading, tracking, filling and mapping share these conventions
+and the hostile-input checks, and split apart they would each restate them.
 """
 
 from __future__ import annotations

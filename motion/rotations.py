@@ -1,9 +1,9 @@
-"""Quaternion helpers over ``scipy.spatial.transform.Rotation``.
+"""Quaternion helpers, numpy and ``scipy.spatial.transform.Rotation``.
 
 Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
-Products, inverses and vector rotation are plain broadcasting numpy (they run in
-the inner loop of forward kinematics); conversions to and from Euler angles,
-matrices and rotation vectors go through scipy.
+Products, inverses, vector rotation, Euler angles and matrices are plain broadcasting
+numpy (they run in the inner loops of forward kinematics and of BVH reading and writing,
+where scipy's per-call cost dominated); rotation vectors go through scipy.
 
 Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
 in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
@@ -12,8 +12,6 @@ two columns of the matrix).
 """
 
 from __future__ import annotations
-
-import warnings
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -102,13 +100,13 @@ def canonicalize(q: np.ndarray) -> np.ndarray:
 
 
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array."""
-    q = np.array(q, dtype=np.float64, copy=True)
-    q = np.moveaxis(q, axis, 0)
-    for i in range(1, q.shape[0]):
-        flip = np.sum(q[i] * q[i - 1], axis=-1) < 0
-        q[i][flip] *= -1
-    return np.moveaxis(q, 0, axis)
+    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array. Each
+    quaternion's sign is the product of the flips before it (a cumulative product, not a
+    loop over frames)."""
+    q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0)
+    flips = np.where(np.sum(q[1:] * q[:-1], axis=-1) < 0, -1.0, 1.0)
+    signs = np.concatenate([np.ones((1,) + flips.shape[1:]), np.cumprod(flips, axis=0)])
+    return np.moveaxis(q * signs[..., None], 0, axis)
 
 
 def angle(q: np.ndarray) -> np.ndarray:
@@ -124,41 +122,101 @@ def _scipy_order(order: str) -> str:
     return order  # upper case = intrinsic, which is what BVH channels mean
 
 
+def _axes(order: str) -> tuple[int, int, int]:
+    order = _scipy_order(order)
+    return "XYZ".index(order[0]), "XYZ".index(order[1]), "XYZ".index(order[2])
+
+
 def from_euler(e: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Quaternions ``(..., 4)`` from Euler angles ``(..., 3)`` listed in ``order``.
 
     ``order`` is the BVH channel order, e.g. ``"ZXY"``: angles ``e[..., 0]`` about Z,
-    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry.
+    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry. Plain numpy (the
+    product of three axis quaternions): BVH reading converts every joint of every frame.
     """
     e = np.asarray(e, dtype=np.float64)
-    shape = e.shape[:-1]
-    r = Rotation.from_euler(_scipy_order(order), e.reshape(-1, 3), degrees=degrees)
-    return r.as_quat().reshape(shape + (4,))
+    half = (np.deg2rad(e) if degrees else e) * 0.5
+    c, s = np.cos(half), np.sin(half)
+    ca, cb, cc = c[..., 0], c[..., 1], c[..., 2]
+    sa, sb, sc = s[..., 0], s[..., 1], s[..., 2]
+    i, j, k = _axes(order)
+    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
+    # the product (sa e_i, ca)(sb e_j, cb)(sc e_k, cc), written out
+    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+    out = np.empty(e.shape[:-1] + (4,))
+    out[..., i] = sacb * cc + p * casb * sc
+    out[..., j] = casb * cc - p * sacb * sc
+    out[..., k] = cacb * sc + p * sasb * cc
+    out[..., 3] = cacb * cc - p * sasb * sc
+    return out
 
 
 def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
-    """Euler angles ``(..., 3)`` in ``order`` (see :func:`from_euler`) from quaternions."""
-    q = np.asarray(q, dtype=np.float64)
-    shape = q.shape[:-1]
-    r = Rotation.from_quat(normalize(q).reshape(-1, 4))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # gimbal lock is fine: any valid triple
-        e = r.as_euler(_scipy_order(order), degrees=degrees)
-    return e.reshape(shape + (3,))
+    """Euler angles ``(..., 3)`` in ``order`` (see :func:`from_euler`) from quaternions.
+
+    Plain numpy on the rotation matrix R = Ri(a) Rj(b) Rk(c): b from R[i, k], a and c
+    from the rest of row i and column k; at gimbal lock (|cos b| ~ 0) c is 0 and a takes
+    the whole turn about the shared axis.
+    """
+    m = to_matrix(q)
+    i, j, k = _axes(order)
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0  # even permutation of XYZ
+    sin_b = sign * m[..., i, k]
+    cos_b = np.hypot(m[..., i, i], m[..., i, j])
+    b = np.arctan2(sin_b, cos_b)
+    locked = cos_b < 1e-9
+    a = np.where(
+        locked,
+        np.arctan2(sign * m[..., k, j], m[..., j, j]),
+        np.arctan2(-sign * m[..., j, k], m[..., k, k]),
+    )
+    c = np.where(locked, 0.0, np.arctan2(-sign * m[..., i, j], m[..., i, i]))
+    out = np.stack([a, b, c], axis=-1)
+    return np.rad2deg(out) if degrees else out
 
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)``."""
-    q = np.asarray(q, dtype=np.float64)
-    shape = q.shape[:-1]
-    return Rotation.from_quat(normalize(q).reshape(-1, 4)).as_matrix().reshape(shape + (3, 3))
+    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` (normalised first)."""
+    q = normalize(q)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
 
 
 def from_matrix(m: np.ndarray) -> np.ndarray:
-    """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``."""
+    """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``: Shepperd's
+    method in numpy (each from its largest of w, x, y, z, so no division by a small number);
+    a matrix that is not quite orthonormal gives the normalised nearest quaternion."""
     m = np.asarray(m, dtype=np.float64)
-    shape = m.shape[:-2]
-    return Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat().reshape(shape + (4,))
+    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
+    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    # 4 w^2, 4 x^2, 4 y^2, 4 z^2 (times the same scale); the largest picks the formula
+    squares = np.stack(
+        [1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22],
+        axis=-1,
+    )
+    best = np.argmax(squares, axis=-1)
+    candidates = np.stack(
+        [
+            np.stack([m21 - m12, m02 - m20, m10 - m01, squares[..., 0]], axis=-1),
+            np.stack([squares[..., 1], m01 + m10, m02 + m20, m21 - m12], axis=-1),
+            np.stack([m01 + m10, squares[..., 2], m12 + m21, m02 - m20], axis=-1),
+            np.stack([m02 + m20, m12 + m21, squares[..., 3], m10 - m01], axis=-1),
+        ],
+        axis=-2,
+    )
+    q = np.take_along_axis(candidates, best[..., None, None], axis=-2)[..., 0, :]
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def to_6d(q: np.ndarray) -> np.ndarray:

@@ -54,6 +54,12 @@ class Settings(BaseSettings):
     max_frames: int = Field(20_000, ge=1, description="frames per clip, in or out")
     max_audio_seconds: float = Field(900.0, gt=0, description="decoded audio length limit")
     request_timeout_s: float = Field(60.0, gt=0, description="limit for one inference (-> 504)")
+    queue_wait_s: float = Field(
+        5.0, gt=0, description="longest wait for an inference slot before a 503 (overloaded)"
+    )
+    max_queued: int = Field(
+        32, ge=0, description="requests waiting for an inference slot; one more is a 503"
+    )
 
     # Declared after ``workers``: their defaults are computed from it.
     max_concurrent_inferences: int = Field(

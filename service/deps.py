@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import Depends, Request
 
 from service.config import Settings
-from service.inference import InferenceRunner, get_runner
+from service.inference import InferenceRunner
 from service.registry import ModelRegistry
 
 
@@ -18,6 +18,10 @@ def get_settings(request: Request) -> Settings:
 
 def get_registry(request: Request) -> ModelRegistry:
     return request.app.state.registry
+
+
+def get_runner(request: Request) -> InferenceRunner:
+    return request.app.state.runner
 
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]

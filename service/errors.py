@@ -13,23 +13,11 @@ happened this time, ``instance`` is the request path. Extension members: ``reque
 always; ``line`` (1-based line of a text file), ``unmapped`` (joint names), ``limit`` where
 they apply; ``errors`` (field errors) for a malformed request.
 
-======================  ======  ===============================================
-slug                    status  raised for
-======================  ======  ===============================================
-invalid-request         400     fields missing or malformed (request validation)
-invalid-input           400     a file we read but that is malformed (MotionError "invalid")
-not-found               404     unknown path, style or model (:class:`NotFound`)
-method-not-allowed      405     wrong method for a path
-too-large               413     upload or clip over a limit (:class:`PayloadTooLarge`)
-unsupported-media-type  415     a format we do not read (:class:`UnsupportedMediaType`)
-unusable-input          422     well-formed but unusable (MotionError "unusable")
-internal-error          500     a bug: logged with its traceback, never shown
-not-ready               503     models not loaded (yet) (:class:`NotReady`)
-timeout                 504     inference over ``request_timeout_s`` (:class:`Timeout`)
-======================  ======  ===============================================
-
-Library code raises :class:`motion.errors.MotionError`; service code raises a
-:class:`ServiceError` subclass. Both become problems here and nowhere else.
+:data:`CATALOGUE` lists every problem type (slug, status, title, what raises it) once; the
+exception classes, the answers to the framework's own errors and the OpenAPI documentation
+all read it. Library code raises :class:`motion.errors.MotionError` (its ``kind`` names a
+slug of the catalogue); service code raises a :class:`ServiceError` subclass. Both become
+problems here and nowhere else.
 """
 
 from __future__ import annotations
@@ -37,8 +25,9 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from http import HTTPStatus
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from fastapi import FastAPI, Request
@@ -57,25 +46,42 @@ logger = logging.getLogger(__name__)
 PROBLEM_BASE = "https://motion-style.example/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 
-# MotionError.kind -> (status, slug, title)
-MOTION_KINDS: dict[str, tuple[int, str, str]] = {
-    "invalid": (400, "invalid-input", "Invalid input"),
-    "unusable": (422, "unusable-input", "Unusable input"),
-    "too-large": (413, "too-large", "Content too large"),
-    "unsupported": (415, "unsupported-media-type", "Unsupported media type"),
+
+@dataclass(frozen=True)
+class ProblemType:
+    slug: str
+    status: int
+    title: str
+    raised_for: str
+
+
+CATALOGUE: dict[str, ProblemType] = {
+    p.slug: p
+    for p in (
+        ProblemType("invalid-request", 400, "Invalid request", "fields missing or malformed"),
+        ProblemType("invalid-input", 400, "Invalid input", "a file we read but is malformed"),
+        ProblemType("not-found", 404, "Not found", "unknown path, style or model"),
+        ProblemType("method-not-allowed", 405, "Method not allowed", "wrong method for a path"),
+        ProblemType("too-large", 413, "Content too large", "upload, clip or audio over a limit"),
+        ProblemType(
+            "unsupported-media-type", 415, "Unsupported media type", "a format we do not read"
+        ),
+        ProblemType("unusable-input", 422, "Unusable input", "well-formed but unusable"),
+        ProblemType("internal-error", 500, "Internal server error", "a bug (logged, not shown)"),
+        ProblemType("not-ready", 503, "Service not ready", "models not loaded (yet)"),
+        ProblemType(
+            "overloaded", 503, "Service overloaded", "no inference slot within queue_wait_s"
+        ),
+        ProblemType("timeout", 504, "Timeout", "inference over request_timeout_s"),
+    )
 }
 
-# status -> (slug, title) for HTTP errors raised by the framework (routing, methods)
-HTTP_PROBLEMS: dict[int, tuple[str, str]] = {
-    400: ("invalid-request", "Invalid request"),
-    404: ("not-found", "Not found"),
-    405: ("method-not-allowed", "Method not allowed"),
-    413: ("too-large", "Content too large"),
-    415: ("unsupported-media-type", "Unsupported media type"),
-    422: ("unusable-input", "Unusable input"),
-    500: ("internal-error", "Internal server error"),
-    503: ("not-ready", "Service not ready"),
-    504: ("timeout", "Timeout"),
+# MotionError.kind -> slug ("invalid" is the default)
+MOTION_KINDS = {
+    "invalid": "invalid-input",
+    "unusable": "unusable-input",
+    "too-large": "too-large",
+    "unsupported": "unsupported-media-type",
 }
 
 
@@ -93,9 +99,11 @@ class Problem(BaseModel):
 
 
 def problem_kind(status: int) -> tuple[str, str]:
-    """``(slug, title)`` for an HTTP status: from :data:`HTTP_PROBLEMS`, else its phrase."""
-    if status in HTTP_PROBLEMS:
-        return HTTP_PROBLEMS[status]
+    """``(slug, title)`` for an HTTP status: the catalogue's first type with that status,
+    else the status phrase."""
+    for problem in CATALOGUE.values():
+        if problem.status == status:
+            return problem.slug, problem.title
     try:
         phrase = HTTPStatus(status).phrase
     except ValueError:
@@ -104,96 +112,82 @@ def problem_kind(status: int) -> tuple[str, str]:
 
 
 def problem_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
-    """``responses=`` entries for a route's OpenAPI: the given statuses as problem+json."""
-    return {
-        status: {
+    """``responses=`` entries for a route's OpenAPI: the given statuses as problem+json,
+    described by the catalogue's titles for that status."""
+    out: dict[int | str, dict[str, Any]] = {}
+    for status in statuses:
+        titles = [p.title for p in CATALOGUE.values() if p.status == status]
+        out[status] = {
             "content": {PROBLEM_MEDIA_TYPE: {"schema": Problem.model_json_schema()}},
-            "description": problem_kind(status)[1],
+            "description": " or ".join(titles) or problem_kind(status)[1],
         }
-        for status in statuses
-    }
+    return out
 
 
 class ServiceError(StarletteHTTPException):
-    """An error the service reports as a problem: ``ServiceError(status, title, detail, **ext)``.
-
-    Extension members are keyword arguments (``limit=...``); ``slug`` picks the problem type
-    (default: from the status); ``headers`` are added to the response. Subclasses fix status,
-    slug and title, so ``NotReady("models are loading")`` is enough.
+    """An error the service reports as a problem. Subclasses name their catalogue entry
+    (``slug``), so ``NotReady("models are loading")`` is enough; extension members are
+    keyword arguments (``limit=...``), ``headers`` are added to the response.
 
     It is a Starlette ``HTTPException`` so that FastAPI lets it through untouched when raised
     while a request body is being read (see :mod:`service.middleware`).
     """
 
-    status: int = 500
-    slug: str = "internal-error"
-    title: str = "Internal server error"
+    slug: ClassVar[str] = "internal-error"
 
     def __init__(
-        self,
-        status: int | None = None,
-        title: str | None = None,
-        detail: str = "",
-        *,
-        slug: str | None = None,
-        headers: Mapping[str, str] | None = None,
-        **ext: Any,
+        self, detail: str = "", *, headers: Mapping[str, str] | None = None, **ext: Any
     ) -> None:
-        status = status or type(self).status
-        super().__init__(status_code=status, detail=detail, headers=dict(headers or {}))
-        default_slug, default_title = problem_kind(status)
-        if title is not None:
-            self.title = title
-        elif type(self) is ServiceError:
-            self.title = default_title
-        if slug is not None:
-            self.slug = slug
-        elif type(self) is ServiceError:
-            self.slug = default_slug
+        problem = CATALOGUE[self.slug]
+        super().__init__(status_code=problem.status, detail=detail, headers=dict(headers or {}))
+        self.title = problem.title
         self.ext = ext
 
     def __str__(self) -> str:
         return f"{self.status_code} {self.title}: {self.detail}"
 
 
-class FixedServiceError(ServiceError):
-    """A service error whose status, slug and title are class attributes; raise it with
-    ``(detail, **ext)``. Subclass it to add a problem type (and add the slug to the table)."""
+class InvalidRequest(ServiceError):
+    """A form field that is present but malformed (400)."""
 
-    def __init__(
-        self, detail: str = "", *, headers: Mapping[str, str] | None = None, **ext: Any
-    ) -> None:
-        super().__init__(type(self).status, type(self).title, detail, headers=headers, **ext)
+    slug = "invalid-request"
 
 
-class NotFound(FixedServiceError):
+class NotFound(ServiceError):
     """Unknown style, model or other named resource (404)."""
 
-    status, slug, title = 404, "not-found", "Not found"
+    slug = "not-found"
 
 
-class PayloadTooLarge(FixedServiceError):
+class PayloadTooLarge(ServiceError):
     """Upload, clip or audio over a limit (413); pass ``limit=``."""
 
-    status, slug, title = 413, "too-large", "Content too large"
+    slug = "too-large"
 
 
-class UnsupportedMediaType(FixedServiceError):
+class UnsupportedMediaType(ServiceError):
     """A file format or content type we do not read (415)."""
 
-    status, slug, title = 415, "unsupported-media-type", "Unsupported media type"
+    slug = "unsupported-media-type"
 
 
-class NotReady(FixedServiceError):
+class NotReady(ServiceError):
     """Models not loaded, still loading, or failed to load (503)."""
 
-    status, slug, title = 503, "not-ready", "Service not ready"
+    slug = "not-ready"
 
 
-class Timeout(FixedServiceError):
+class Overloaded(ServiceError):
+    """No inference slot freed within ``queue_wait_s``, or the queue is full (503 with
+    ``Retry-After``)."""
+
+    slug = "overloaded"
+
+
+class Timeout(ServiceError):
     """Inference ran past ``request_timeout_s`` (504); pass ``limit=``."""
 
-    status, slug, title = 504, "timeout", "Timeout"
+    slug = "timeout"
 
 
 def _slugify(text: str) -> str:
@@ -257,11 +251,9 @@ def problem_response(
     extensions = {str(k): json_safe(v) for k, v in ext.items() if v is not None}
     body.update({k: v for k, v in extensions.items() if k not in body})
     request_id = request_id_of(scope)
-    out_headers = dict(headers or {})
-    if request_id is not None:
+    if request_id is not None:  # the header is the request-context middleware's
         body["request_id"] = request_id
-        out_headers.setdefault("X-Request-Id", request_id)
-    return ProblemResponse(body, status_code=status, headers=out_headers)
+    return ProblemResponse(body, status_code=status, headers=dict(headers or {}))
 
 
 def service_error_response(scope: Scope, exc: ServiceError) -> ProblemResponse:
@@ -278,11 +270,12 @@ def service_error_response(scope: Scope, exc: ServiceError) -> ProblemResponse:
 
 def internal_error_response(scope: Scope) -> ProblemResponse:
     """The 500 answer: no traceback, no exception text; the log has them."""
+    problem = CATALOGUE["internal-error"]
     return problem_response(
         scope,
-        status=500,
-        slug="internal-error",
-        title="Internal server error",
+        status=problem.status,
+        slug=problem.slug,
+        title=problem.title,
         detail="The server failed to process the request; the error has been logged.",
     )
 
@@ -294,9 +287,14 @@ async def handle_service_error(request: Request, exc: Exception) -> ProblemRespo
 
 async def handle_motion_error(request: Request, exc: Exception) -> ProblemResponse:
     assert isinstance(exc, MotionError)
-    status, slug, title = MOTION_KINDS.get(exc.kind, MOTION_KINDS["invalid"])
+    problem = CATALOGUE[MOTION_KINDS.get(exc.kind, "invalid-input")]
     return problem_response(
-        request.scope, status=status, slug=slug, title=title, detail=exc.message, **exc.details()
+        request.scope,
+        status=problem.status,
+        slug=problem.slug,
+        title=problem.title,
+        detail=exc.message,
+        **exc.details(),
     )
 
 
@@ -312,11 +310,12 @@ async def handle_validation_error(request: Request, exc: Exception) -> ProblemRe
     ]
     where = ", ".join(".".join(e["loc"]) + ": " + e["msg"] for e in errors[:3])
     more = f" (and {len(errors) - 3} more)" if len(errors) > 3 else ""
+    problem = CATALOGUE["invalid-request"]
     return problem_response(
         request.scope,
-        status=400,
-        slug="invalid-request",
-        title="Invalid request",
+        status=problem.status,
+        slug=problem.slug,
+        title=problem.title,
         detail=f"The request is malformed: {where}{more}" if where else "The request is malformed",
         errors=errors,
     )

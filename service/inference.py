@@ -1,15 +1,21 @@
-"""Running CPU-bound work (onnxruntime, numpy) off the event loop, bounded and timed.
+"""The inference pool: CPU-bound work (onnxruntime, numpy) off the event loop, behind a
+bounded queue, timed.
 
-``await run_inference(request, fn, *args)`` (or ``await runner.run(fn, *args)`` with
-:data:`service.deps.InferenceDep`) runs ``fn(*args)`` on one of
-``max_concurrent_inferences`` threads and gives up after ``request_timeout_s`` with a 504
-problem, so ``/healthz`` and ``/readyz`` answer while long clips are processed.
+``await runner.run(fn, *args)`` waits for one of ``max_concurrent_inferences`` slots, then
+runs ``fn(*args)`` on a thread of a pool of that size, so ``/healthz`` and ``/readyz`` answer
+while long clips are processed. Overload is shed, not queued without end:
 
-A fixed thread pool bounds the work itself, not only the waiting: a timed-out call cannot be
-interrupted, but it keeps its thread until it ends, so no more than
-``max_concurrent_inferences`` ever run at once (a capacity limiter would release its token
-when the waiting task is cancelled, letting abandoned work pile up). The time spent queued
-for a thread counts towards the timeout; a call that times out while queued never runs.
+- at most ``max_queued`` calls wait for a slot; one more is a 503 ``overloaded`` problem at
+  once;
+- a call that cannot start within ``queue_wait_s`` is a 503 ``overloaded`` problem;
+- both carry ``Retry-After`` (the wait, rounded up), and the queue depth is the gauge
+  ``motion_inference_queue_depth``.
+
+A slot is held until the work itself ends: a call that runs past ``request_timeout_s`` gets a
+504, but its thread cannot be interrupted and keeps the slot, so abandoned work never piles
+up beyond the pool. Uploads wait in the queue as their form left them (spooled files, on disk
+beyond 1 MB), and are read and parsed only once the call starts (the engines' ``prepare``),
+so the memory of waiting requests stays small.
 """
 
 from __future__ import annotations
@@ -17,62 +23,139 @@ from __future__ import annotations
 import asyncio
 import contextvars
 import functools
+import math
+import threading
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
-from starlette.requests import Request
-
 from service import metrics
-from service.errors import NotReady, Timeout
+from service.errors import NotReady, Overloaded, Timeout
 
 T = TypeVar("T")
 
 
 class InferenceRunner:
-    """A bounded pool of inference threads with a per-call timeout; one per app."""
+    """A bounded pool of inference threads behind a bounded queue; one per app.
 
-    def __init__(self, max_concurrent: int, timeout_s: float) -> None:
+    Slots are counted under a thread lock and handed to waiters in arrival order, each
+    waiter a future of its own event loop, so the runner works from any loop (the app's,
+    or a test client's per request) and a slot is passed on from the thread whose work
+    ended."""
+
+    def __init__(
+        self, max_concurrent: int, timeout_s: float, queue_wait_s: float, max_queued: int
+    ) -> None:
         self.max_concurrent = max_concurrent
         self.timeout_s = timeout_s
-        self.in_flight = 0  # submitted and not yet finished or abandoned (queued + running)
+        self.queue_wait_s = queue_wait_s
+        self.max_queued = max_queued
+        self.running = 0  # holding a slot (their work not yet ended)
+        self._free = max_concurrent
+        self._waiters: deque[tuple[asyncio.AbstractEventLoop, asyncio.Future]] = deque()
+        self._lock = threading.Lock()
         self._executor: ThreadPoolExecutor | None = None
+
+    @property
+    def queued(self) -> int:
+        """Requests waiting for a slot."""
+        return len(self._waiters)
 
     def start(self) -> None:
         self._executor = ThreadPoolExecutor(self.max_concurrent, thread_name_prefix="inference")
 
     def close(self) -> None:
-        """Stop taking work; queued calls are cancelled, running ones finish on their own."""
+        """Stop taking work; running calls finish on their own."""
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
 
+    def _overloaded(self, why: str) -> Overloaded:
+        return Overloaded(
+            why,
+            headers={"Retry-After": str(max(1, math.ceil(self.queue_wait_s)))},
+            queue_wait_s=self.queue_wait_s,
+            max_queued=self.max_queued,
+        )
+
+    async def _acquire(self) -> None:
+        """A slot, waiting at most ``queue_wait_s`` behind at most ``max_queued`` others."""
+        loop = asyncio.get_running_loop()
+        with self._lock:
+            if self._free > 0 and not self._waiters:
+                self._free -= 1
+                self.running += 1
+                metrics.IN_FLIGHT.inc()
+                return
+            if len(self._waiters) >= self.max_queued:
+                raise self._overloaded(
+                    f"{len(self._waiters)} requests are already waiting for an inference slot "
+                    f"(max_queued {self.max_queued})"
+                )
+            waiter = loop.create_future()
+            self._waiters.append((loop, waiter))
+            metrics.QUEUE_DEPTH.inc()
+        try:
+            await asyncio.wait_for(asyncio.shield(waiter), self.queue_wait_s)
+        except BaseException as exc:  # the wait ran out, or the request was cancelled
+            with self._lock:
+                still_waiting = (loop, waiter) in self._waiters
+                if still_waiting:
+                    self._waiters.remove((loop, waiter))
+                    metrics.QUEUE_DEPTH.dec()
+            if not still_waiting:  # granted meanwhile: the slot is ours
+                if isinstance(exc, TimeoutError):
+                    await waiter
+                    return
+                self._release()  # cancelled: pass it on
+                raise
+            if isinstance(exc, TimeoutError):
+                raise self._overloaded(
+                    f"no inference slot freed within {self.queue_wait_s:g} s (queue_wait_s)"
+                ) from None
+            raise
+
+    def _release(self) -> None:
+        """Pass the slot to the first waiter, or free it (any thread)."""
+        with self._lock:
+            self.running -= 1
+            metrics.IN_FLIGHT.dec()
+            if not self._waiters:
+                self._free += 1
+                return
+            loop, waiter = self._waiters.popleft()
+            metrics.QUEUE_DEPTH.dec()
+            self.running += 1  # the waiter's, from now on
+            metrics.IN_FLIGHT.inc()
+
+        def grant() -> None:
+            if not waiter.done():
+                waiter.set_result(None)
+
+        try:
+            loop.call_soon_threadsafe(grant)
+        except RuntimeError:  # its loop has closed: nobody will use the slot
+            self._release()
+
     async def run(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> T:
         """``fn(*args, **kwargs)`` in an inference thread (with the caller's context, so log
-        lines keep the request id); :class:`Timeout` (504) after ``timeout_s``."""
+        lines keep the request id): 503 :class:`Overloaded` when it cannot start in time,
+        504 :class:`Timeout` when it runs past ``timeout_s``."""
         if self._executor is None:
             raise NotReady("the inference pool is not running")
+        await self._acquire()
         context = contextvars.copy_context()
-        future = self._executor.submit(context.run, functools.partial(fn, *args, **kwargs))
-        self.in_flight += 1
-        metrics.IN_FLIGHT.inc()
+        try:
+            future = self._executor.submit(context.run, functools.partial(fn, *args, **kwargs))
+        except RuntimeError:  # shut down meanwhile
+            self._release()
+            raise NotReady("the inference pool is not running") from None
+        # the slot is passed on when the work ends, not when its caller stops waiting
+        future.add_done_callback(lambda _: self._release())
         try:
             return await asyncio.wait_for(asyncio.wrap_future(future), self.timeout_s)
         except TimeoutError:
-            future.cancel()  # only succeeds while still queued
             raise Timeout(
-                f"inference did not finish within {self.timeout_s:g} s",
-                limit=self.timeout_s,
+                f"inference did not finish within {self.timeout_s:g} s", limit=self.timeout_s
             ) from None
-        finally:
-            self.in_flight -= 1
-            metrics.IN_FLIGHT.dec()
-
-
-def get_runner(request: Request) -> InferenceRunner:
-    return request.app.state.runner
-
-
-async def run_inference(request: Request, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> T:
-    """Run ``fn(*args, **kwargs)`` through the app's :class:`InferenceRunner`."""
-    return await get_runner(request).run(fn, *args, **kwargs)

@@ -4,8 +4,8 @@ The upload size is enforced for every request by :class:`service.middleware.Uplo
 and the time of one inference by :class:`service.inference.InferenceRunner`; these helpers
 cover what only an engine can see once it has read a file::
 
-    motion = limits.read_bvh(raw, settings, field="content")   # MotionError -> 400/415/422
-    limits.check_frames(result, settings, what="result")       # output frames count too
+    limits.check_frames(motion, settings, what="content")      # input and output frames
+    limits.check_frames(result, settings, what="result")
     samples, sr = limits.decode_audio(raw, settings)            # stops decoding at the limit
     kp = limits.read_keypoints(raw, settings)
 
@@ -26,7 +26,6 @@ if TYPE_CHECKING:
     import numpy as np
 
     from motion.keypoints import Keypoints2D
-    from motion.skeleton import Motion
 
 
 class HasFrames(Protocol):
@@ -80,19 +79,6 @@ def check_audio_seconds(
     if duration > settings.max_audio_seconds:
         raise audio_over_limit(duration, settings)
     return duration
-
-
-def read_bvh(data: bytes | str, settings: Settings, *, what: str = "clip") -> Motion:
-    """Parse an uploaded BVH (:func:`motion.bvh.loads`) and check its frame count.
-
-    Malformed files raise :class:`MotionError` (a 400 problem with ``line``). Blocking: call
-    it through the inference pool.
-    """
-    from motion import bvh
-
-    motion = bvh.loads(data)
-    check_frames(motion, settings, what=what)
-    return motion
 
 
 def decode_audio(data: bytes, settings: Settings) -> tuple[np.ndarray, int]:

@@ -68,7 +68,10 @@ def create_app(
     app.state.settings = settings
     app.state.registry = ModelRegistry(settings, engines)
     app.state.runner = InferenceRunner(
-        settings.max_concurrent_inferences, settings.request_timeout_s
+        settings.max_concurrent_inferences,
+        settings.request_timeout_s,
+        settings.queue_wait_s,
+        settings.max_queued,
     )
 
     install_error_handlers(app)

@@ -8,7 +8,8 @@ motion_http_request_duration_seconds       histogram  endpoint
 motion_inference_stage_duration_seconds    histogram  model, stage
 motion_frames_processed_total              counter    endpoint, model
 motion_errors_total                        counter    type (problem slug: ``too-large``...)
-motion_inferences_in_flight                gauge      (none): queued + running inferences
+motion_inferences_in_flight                gauge      (none): inferences holding a slot
+motion_inference_queue_depth               gauge      (none): requests waiting for a slot
 motion_model_info                          gauge      name, version, family, sha256 (1 = loaded)
 motion_ready                               gauge      (none): 1 when every model is ready
 =========================================  =========  ==========================================
@@ -84,7 +85,12 @@ ERRORS = Counter(
 )
 IN_FLIGHT = Gauge(
     "motion_inferences_in_flight",
-    "Inferences submitted and not yet finished or abandoned (queued + running)",
+    "Inferences holding a slot of the pool (running, or abandoned by a timeout and still running)",
+    multiprocess_mode="livesum",
+)
+QUEUE_DEPTH = Gauge(
+    "motion_inference_queue_depth",
+    "Requests waiting for an inference slot (beyond max_queued or queue_wait_s: 503)",
     multiprocess_mode="livesum",
 )
 MODEL_INFO = Gauge(
@@ -156,10 +162,6 @@ class StageTimer:
 
     def stage(self, name: str):
         return stage(name, model=self.model, timings=self.ms)
-
-    @property
-    def total_ms(self) -> float:
-        return sum(self.ms.values())
 
     def server_timing(self) -> str:
         """``decode;dur=1.2, encode;dur=3.4`` (stage names made token-safe)."""

@@ -1,24 +1,16 @@
-"""Request plumbing every family shares: an uploaded BVH onto the canonical skeleton, and a
-canonical result back onto the request's own skeleton as a BVH (or JSON) response.
+"""The one-way path of a request: parse -> canonical -> engine -> retarget -> write.
 
-A route reads the upload on the event loop (:func:`read_upload`), then does the blocking
-rest in the inference pool::
-
-    data = await pipeline.read_upload(content, settings)
-    mapping = pipeline.parse_mapping(mapping_field)
-
-    def work():
-        timer = metrics.StageTimer(engine.name)
-        clip = pipeline.load_clip(data, settings, timer, mapping=mapping)
-        canon = engine.stylize(clip.canonical, ...)                # the family's own work
-        return pipeline.finish(clip, canon, timer)                 # -> Result
-
-    result = await run_inference(request, work)
-    return pipeline.respond(request, result, engine, fmt=format, name="stylized")
+A route reads its fields into the engine's request (files kept as the form left them,
+:class:`Upload`) and calls :func:`infer`: one engine lookup (``registry.engine_for``), then
+``engine.infer(request)`` in the inference pool (:mod:`service.inference`), where the engine
+walks its three steps: ``prepare`` reads the uploads (:func:`load_clip`: parse, frame limit,
+joint mapping, onto the canonical skeleton at 30 fps), ``predict`` runs the networks,
+``finish`` post-processes and hands the canonical result to :func:`write_result` (back onto
+the request's own skeleton, frame limit, BVH text). :func:`respond` answers.
 
 Errors: a malformed BVH is a 400 problem with ``line``; a media type that is not text a
-415; more than ``max_frames`` frames a 413 with ``limit``; a skeleton that cannot be mapped
-a 422 with ``unmapped``; a ``mapping`` that is not a JSON object of names a 400.
+415; more than ``max_frames`` frames (in or out) a 413 with ``limit``; a skeleton that cannot
+be mapped a 422 with ``unmapped``; a ``mapping`` that is not a JSON object of names a 400.
 """
 
 from __future__ import annotations
@@ -37,8 +29,12 @@ from motion import canonical as C
 from motion.skeleton import Motion
 from service import limits, metrics
 from service.config import Settings
-from service.engines.base import Engine
-from service.errors import PayloadTooLarge, ServiceError, UnsupportedMediaType, problem_responses
+from service.errors import (
+    InvalidRequest,
+    PayloadTooLarge,
+    UnsupportedMediaType,
+    problem_responses,
+)
 
 Format = Literal["bvh", "json"]
 
@@ -58,55 +54,100 @@ def bvh_responses(description: str) -> dict:
     }
 
 
-class InvalidField(ServiceError):
-    """A form field that is present but malformed (400 invalid-request)."""
-
-    def __init__(self, detail: str, **ext: Any) -> None:
-        super().__init__(400, "Invalid request", detail, slug="invalid-request", **ext)
+# --- reading the request (event loop) -------------------------------------------------------
 
 
-async def read_upload(
-    upload: UploadFile,
+@dataclass
+class Upload:
+    """A file field: checked (media type, size) when the request is read, its bytes read
+    when the work starts (:meth:`read`), so a request waiting for an inference slot holds
+    the form's spooled file (on disk beyond 1 MB), not a copy in memory."""
+
+    field: str
+    file: UploadFile | None = None
+    data: bytes | None = None  # a file sent as a plain text field
+    filename: str | None = None
+
+    def read(self) -> bytes:
+        """The bytes (blocking); 400 when there is nothing but white space."""
+        if self.data is not None:
+            data = self.data
+        else:
+            assert self.file is not None
+            self.file.file.seek(0)
+            data = self.file.file.read()
+        if not data.strip():
+            raise InvalidRequest(f"'{self.field}' is empty", field=self.field)
+        return data
+
+
+def upload(
+    file: UploadFile,
     settings: Settings,
     *,
     field: str = "content",
     accept: tuple[str, ...] = TEXT_TYPES,
     what: str = "a BVH text file",
-) -> bytes:
-    """The bytes of an uploaded file: 415 when its media type starts with none of ``accept``
-    (``'<field>' must be <what>``), 413 over ``max_upload_bytes`` (the middleware usually
-    stops it first), 400 when empty."""
-    media = (upload.content_type or "").split(";")[0].strip().lower()
+) -> Upload:
+    """An uploaded file as an :class:`Upload`: 415 when its media type starts with none of
+    ``accept`` (``'<field>' must be <what>``), 413 over ``max_upload_bytes`` (the middleware
+    usually stops it first), 400 when empty."""
+    media = (file.content_type or "").split(";")[0].strip().lower()
     if media and not media.startswith(accept):
         raise UnsupportedMediaType(
             f"'{field}' must be {what}, got media type {media!r}", field=field
         )
-    data = await upload.read(settings.max_upload_bytes + 1)
+    size = file.size
+    if size is None:
+        file.file.seek(0, 2)
+        size = file.file.tell()
+    if size > settings.max_upload_bytes:
+        raise upload_too_large(field, settings)
+    if size == 0:
+        raise InvalidRequest(f"'{field}' is empty", field=field)
+    return Upload(field, file=file, filename=file.filename)
+
+
+def text_upload(text: str, settings: Settings, *, field: str) -> Upload:
+    """A file sent as a plain form field (BVH text)."""
+    data = text.encode()
     if len(data) > settings.max_upload_bytes:
-        raise PayloadTooLarge(
-            f"'{field}' is over {settings.max_upload_bytes} bytes",
-            limit=settings.max_upload_bytes,
-            limit_name="max_upload_bytes",
-        )
-    if not data.strip():
-        raise InvalidField(f"'{field}' is empty", field=field)
-    return data
+        raise upload_too_large(field, settings)
+    return Upload(field, data=data)
 
 
-def parse_mapping(text: str | None) -> dict[str, str] | None:
-    """The optional ``mapping`` form field: a JSON object of joint names (either way round);
-    400 when it is not one."""
+def upload_too_large(field: str, settings: Settings) -> PayloadTooLarge:
+    return PayloadTooLarge(
+        f"'{field}' is over {settings.max_upload_bytes} bytes",
+        limit=settings.max_upload_bytes,
+        limit_name="max_upload_bytes",
+    )
+
+
+def parse_mapping(text: str | None, field: str = "mapping") -> dict[str, str] | None:
+    """An optional joint-name map field: a JSON object of joint names (either way round);
+    400 naming ``field`` when it is not one."""
     if text is None or not text.strip():
         return None
     try:
         value = json.loads(text)
     except ValueError as exc:
-        raise InvalidField(f"'mapping' is not JSON: {exc}", field="mapping") from None
+        raise InvalidRequest(f"'{field}' is not JSON: {exc}", field=field) from None
     if not isinstance(value, dict) or not all(
         isinstance(k, str) and isinstance(v, str) for k, v in value.items()
     ):
-        raise InvalidField("'mapping' must be a JSON object of joint names", field="mapping")
+        raise InvalidRequest(f"'{field}' must be a JSON object of joint names", field=field)
     return value
+
+
+async def infer(request: Request, family: str, job: Any) -> Any:
+    """The data plane: the engine of ``family`` that takes ``job`` (one lookup, one readiness
+    rule: ``registry.engine_for``), then ``engine.infer(job)`` in the inference pool."""
+    engine = request.app.state.registry.engine_for(family, job)
+    return await request.app.state.runner.run(engine.infer, job)
+
+
+# --- inside the inference pool (blocking) ---------------------------------------------------
 
 
 @dataclass
@@ -119,45 +160,69 @@ class Clip:
     canonical: Motion
 
 
-@dataclass
-class Result:
-    """A finished request: BVH text on the request's skeleton, its frames and rate, the
-    stage timings and any warnings."""
-
-    bvh: str
-    frames: int
-    fps: float
-    timer: metrics.StageTimer
-    warnings: list[str] = field(default_factory=list)
-
-
 def load_clip(
-    data: bytes | str,
+    source: Upload,
     settings: Settings,
     timer: metrics.StageTimer,
     *,
     mapping: dict[str, str] | None = None,
-    what: str = "content",
+    prefix: str = "",
 ) -> Clip:
-    """Parse (400 with ``line``), check frames (413 with ``limit``), map the skeleton
-    (422 with ``unmapped``) and retarget to canonical at 30 fps. Blocking."""
-    with timer.stage("parse"):
-        original = limits.read_bvh(data, settings, what=what)
-    with timer.stage("retarget"):
+    """Read (400 when empty), parse (400 with ``line``), check frames (413 with ``limit``),
+    map the skeleton (422 with ``unmapped``) and retarget to canonical at 30 fps. Stages are
+    timed as ``<prefix>parse`` and ``<prefix>retarget``."""
+    what = source.field
+    with timer.stage(prefix + "parse"):
+        original = bvh.loads(source.read())
+    limits.check_frames(original, settings, what=what)
+    with timer.stage(prefix + "retarget"):
         rig = retarget.make_rig(original.skeleton, original, mapping=mapping)
         canonical = retarget.to_canonical(original, rig, fps=C.FPS)
     limits.check_frames(canonical, settings, what=what)
     return Clip(original, rig, canonical)
 
 
-def finish(clip: Clip, canon: Motion, timer: metrics.StageTimer, warnings=()) -> Result:
-    """The canonical result back on the clip's own skeleton, frame rate and frame count,
-    as BVH text. Blocking."""
-    with timer.stage("retarget_back"):
-        out = retarget.from_canonical(canon, clip.rig, like=clip.original)
+@dataclass
+class Result:
+    """A finished request: BVH text, its frames and rate, warnings, and (set by
+    ``Engine.infer``) the model and the stage timings."""
+
+    bvh: str
+    frames: int
+    fps: float
+    warnings: list[str] = field(default_factory=list)
+    suffix: str = "styled"  # of the download's file name
+    model: tuple[str, str] = ("", "")
+    timer: metrics.StageTimer | None = None
+
+
+def write_result(
+    clip: Clip | None,
+    canon: Motion,
+    settings: Settings,
+    timer: metrics.StageTimer,
+    *,
+    warnings: list[str] | tuple[str, ...] = (),
+    suffix: str = "styled",
+    fps: float | None = None,
+) -> Result:
+    """The canonical result back on the clip's own skeleton (its names, offsets, channels
+    and frame rate, frame for frame with ``clip.original``), or left canonical without a
+    clip; at ``fps`` when given; 413 over ``max_frames``; BVH text."""
+    if clip is not None:
+        with timer.stage("retarget_back"):
+            out = retarget.from_canonical(canon, clip.rig, like=clip.original)
+    else:
+        out = canon
+    if fps is not None:
+        out = out.replace(fps=float(fps))
+    limits.check_frames(out, settings, what="result")
     with timer.stage("write"):
         text = bvh.dumps(out)
-    return Result(text, out.num_frames, float(out.fps), timer, list(warnings))
+    return Result(text, out.num_frames, float(out.fps), list(warnings), suffix)
+
+
+# --- answering (event loop) -----------------------------------------------------------------
 
 
 def _filename(upload_name: str | None, suffix: str) -> str:
@@ -166,38 +231,48 @@ def _filename(upload_name: str | None, suffix: str) -> str:
     return f"{stem}_{re.sub(r'[^A-Za-z0-9._-]+', '_', suffix)}.bvh"
 
 
+def timing_headers(result: Any) -> dict[str, str]:
+    """``X-Model-Version`` and ``Server-Timing`` of an engine's result."""
+    name, version = result.model
+    return {
+        "X-Model-Version": f"{name}/{version}",
+        "Server-Timing": result.timer.server_timing() if result.timer else "",
+    }
+
+
+def timings_ms(result: Any) -> dict[str, float]:
+    return {k: round(v, 2) for k, v in (result.timer.ms if result.timer else {}).items()}
+
+
 def respond(
     request: Request,
     result: Result,
-    engine: Engine,
     *,
     fmt: Format = "bvh",
     upload_name: str | None = None,
-    suffix: str = "styled",
-    endpoint: str | None = None,
 ) -> Response:
-    """The BVH as ``text/plain`` attachment with ``X-Request-Id``, ``X-Model-Version``,
-    ``X-Frames``, ``X-Fps`` and ``Server-Timing``, or with ``fmt="json"`` the object
-    ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings"}`` (same headers)."""
-    metrics.count_frames(endpoint or request.url.path, engine.name, result.frames)
-    request_id = (request.scope.get("state") or {}).get("request_id", "")
+    """The BVH as ``text/plain`` attachment with ``X-Model-Version``, ``X-Frames``, ``X-Fps``
+    and ``Server-Timing`` (``X-Request-Id`` is the middleware's), or with ``fmt="json"`` the
+    object ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings"}`` (same headers)."""
+    route = request.scope.get("route")
+    endpoint = getattr(route, "path", None) or request.scope.get("path", "")
+    name, version = result.model
+    metrics.count_frames(endpoint, name, result.frames)
     headers = {
-        "X-Model-Version": f"{engine.name}/{engine.version}",
+        **timing_headers(result),
         "X-Frames": str(result.frames),
         "X-Fps": f"{result.fps:g}",
-        "Server-Timing": result.timer.server_timing(),
     }
-    if request_id:
-        headers["X-Request-Id"] = request_id
     if fmt == "json":
         body = {
             "bvh": result.bvh,
             "frames": result.frames,
             "fps": result.fps,
-            "model": {"name": engine.name, "version": engine.version},
-            "timings_ms": {k: round(v, 2) for k, v in result.timer.ms.items()},
+            "model": {"name": name, "version": version},
+            "timings_ms": timings_ms(result),
             "warnings": result.warnings,
         }
         return JSONResponse(body, headers=headers)
-    headers["Content-Disposition"] = f'attachment; filename="{_filename(upload_name, suffix)}"'
+    filename = _filename(upload_name, result.suffix)
+    headers["Content-Disposition"] = f'attachment; filename="{filename}"'
     return Response(result.bvh, media_type=BVH_MEDIA_TYPE, headers=headers)

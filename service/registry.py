@@ -183,14 +183,19 @@ class ModelRegistry:
 
     # --- access for routes -----------------------------------------------------------------
 
-    def get(self, name: str) -> Engine:
-        """The engine of model ``name``: 404 if unknown, 503 if not ready."""
-        engine = self.engines.get(name)
-        if engine is None:
-            raise NotFound(f"no model named {name!r}", models=sorted(self.engines))
-        if not engine.ready:
-            raise NotReady(f"model {name!r} is {self.model_status(name)}")
-        return engine
+    def engine_for(self, family: str, request: Any = None) -> Engine:
+        """The first ready engine of ``family`` that accepts ``request``. None ready: 503
+        while the models load or when they failed (:meth:`require_ready`), 404 when the
+        manifest has no such model. Ready ones that all refuse: their 404 (an unknown
+        style names the known ones)."""
+        engines = self.by_family(family)
+        for engine in engines:
+            if engine.accepts(request):
+                return engine
+        if engines:
+            raise engines[0].refusal(request)
+        self.require_ready()
+        raise NotFound(f"no {family} model is installed", models=sorted(self.engines))
 
     def by_family(self, family: str) -> list[Engine]:
         """Ready engines of ``family``, in manifest order."""

@@ -347,13 +347,13 @@ def read_dwm_folder(folder: Path) -> tuple[np.ndarray, dict]:
 def load_dance_with_melody(root: Path | None = None) -> list[Clip]:
     """Dance-with-Melody dances on the canonical skeleton at 30 fps, labelled by genre.
 
-    Marker positions are fitted with ``motion.ik.fit_positions`` (bone lengths exact,
+    Marker positions are fitted with ``motion.fit.fit_positions`` (bone lengths exact,
     pelvis and chest from several markers), the floor is put at the feet's ground
     level, and the clip remembers where it sits in its song: ``extra["audio"]`` (path
     relative to the data folder) and ``extra["audio_offset_s"]`` (``start_position /
     25`` as ``config.json`` gives it; see issue 5 for whether that alignment holds).
     """
-    from motion import contacts, ik, kinematics
+    from motion import contacts, fit, kinematics
 
     root = (root or data_dir()) / "dance-with-melody"
     folders = sorted(p for p in root.glob("DANCE_*") if (p / "skeletons.json").exists())
@@ -363,7 +363,7 @@ def load_dance_with_melody(root: Path | None = None) -> list[Clip]:
         for folder in folders:
             points, config = read_dwm_folder(folder)
             target = dwm_canonical_positions(points)
-            motion = ik.fit_positions(target, C.SKELETON, fps=DWM_FPS)
+            motion = fit.fit_positions(target, C.SKELETON, fps=DWM_FPS)
             gpos = kinematics.global_positions(motion)
             toes = [C.INDEX["Toes_L"], C.INDEX["Toes_R"]]
             floor = float(np.min(contacts.ground_heights(gpos, toes)))  # toes on y = 0

@@ -1,9 +1,18 @@
-"""The engine base class: one model bundle from the manifest, owning its onnxruntime sessions.
+"""The engine base class: one model bundle from the manifest, owning its onnxruntime sessions
+and its requests.
 
 A family engine subclasses :class:`Engine`, loads whatever else its bundle holds in
 :meth:`Engine.load_assets` (statistics, style codes), may give real warm-up inputs in
-:meth:`Engine.warm_inputs`, lists its styles in :meth:`Engine.styles`, and adds the
-methods its routes call (run through :func:`service.inference.run_inference`).
+:meth:`Engine.warm_inputs`, lists its styles in :meth:`Engine.styles`, and serves its
+family's requests in three steps (KServe's preprocess, predict, postprocess), which
+:meth:`Engine.infer` runs and times in the inference pool:
+
+- :meth:`Engine.prepare`: read and parse the uploads, onto the canonical skeleton, features;
+- :meth:`Engine.predict`: run the networks, and nothing else (so a change of graphs is local);
+- :meth:`Engine.finish`: post-process, back onto the request's skeleton, write.
+
+:meth:`Engine.accepts` says whether it can take a request (e.g. offers its style) and
+:meth:`Engine.refusal` the 404 when no engine of the family can.
 """
 
 from __future__ import annotations
@@ -16,7 +25,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from service.config import Settings
+from service.errors import NotFound
 from service.manifest import GraphSpec, ModelEntry
+from service.metrics import StageTimer
 
 if TYPE_CHECKING:
     import onnxruntime
@@ -171,12 +182,42 @@ class Engine:
         logger.info("warmed %s/%s in %.1f ms", self.name, graph, self.warmup_ms[graph])
 
     def run(self, graph: str, feeds: dict[str, np.ndarray]) -> list[np.ndarray]:
-        """Run one graph (blocking: call it through ``run_inference``)."""
+        """Run one graph (blocking: from :meth:`predict`, in the inference pool)."""
         return self.sessions[graph].run(None, feeds)
 
     def styles(self) -> list[dict[str, Any]]:
         """Styles this model offers: ``[{"name": ..., "clips": ...}, ...]`` (clips optional)."""
         return []
+
+    # --- requests -------------------------------------------------------------------------
+
+    def accepts(self, request: Any) -> bool:
+        """Whether this engine can serve ``request`` (cheap: called on the event loop)."""
+        return True
+
+    def refusal(self, request: Any) -> Exception:
+        """The error when no engine of the family accepts ``request``."""
+        return NotFound(f"model {self.name!r} cannot serve this request")
+
+    def infer(self, request: Any) -> Any:
+        """``request`` through :meth:`prepare`, :meth:`predict` and :meth:`finish` (blocking:
+        the inference pool runs it); the result carries the model and the stage timings."""
+        timer = StageTimer(self.name)
+        job = self.prepare(request, timer)
+        outputs = self.predict(job, timer)
+        result = self.finish(job, outputs, timer)
+        result.model = (self.name, self.version)
+        result.timer = timer
+        return result
+
+    def prepare(self, request: Any, timer: StageTimer) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} serves no requests")
+
+    def predict(self, job: Any, timer: StageTimer) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} serves no requests")
+
+    def finish(self, job: Any, outputs: Any, timer: StageTimer) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} serves no requests")
 
     def close(self) -> None:
         self.ready = False

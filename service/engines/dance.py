@@ -17,17 +17,61 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio, ik
+from motion import audio, ik, retarget
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
 from motion.skeleton import Motion
+from service import limits
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.metrics import StageTimer
+from service.pipeline import Clip, Result, Upload, load_clip, write_result
 
 BUCKET = 256  # audio frames: the audio graph runs at multiples of this
 NOISE = 0.05  # std of the seeded noise on the fed-back pose (standardised units)
+
+
+@dataclass
+class DanceRequest:
+    """``POST /v1/dance``: music, an optional genre (predicted when None), a seed, an
+    optional skeleton to retarget onto and the frame rate of the answer."""
+
+    audio: Upload
+    genre: str | None = None
+    seed: int = 0
+    skeleton: Upload | None = None
+    fps: float = 30.0
+    mapping: dict[str, str] | None = None
+
+
+@dataclass
+class DanceJob:
+    """A prepared dance: the music's standardised features ``x (F, A)``, its beats and
+    tempo, the seeded start pose, and for a request the skeleton's clip and frame count."""
+
+    x: np.ndarray
+    tempo: float
+    beats: np.ndarray
+    genre: str | None
+    seed: int
+    start: np.ndarray
+    noise_seed: int
+    beat_warp: bool = True
+    foot_cleanup: bool = True
+    clip: Clip | None = None
+    fps: float = DF.FPS
+    frames: int = 0  # of the answer at ``fps``
+
+
+@dataclass
+class DanceNetworks:
+    """What :meth:`DanceEngine.predict` returns: the genre (given or predicted) and its
+    probabilities, and the rolled-out standardised poses ``(F, M)``."""
+
+    genre: str
+    genre_probs: dict[str, float]
+    poses: np.ndarray
 
 
 @dataclass
@@ -98,47 +142,98 @@ class DanceEngine(Engine):
             prev = pose
         return out
 
-    # --- the whole request ------------------------------------------------------------------
+    # --- the three steps ---------------------------------------------------------------------
 
-    def dance(
+    def prepare(self, request: DanceRequest, timer: StageTimer) -> DanceJob:
+        """Decode the music (413 over ``max_audio_seconds``, 422 when silent), check the
+        answer's frame count, read the skeleton, compute the music's features."""
+        with timer.stage("decode_audio"):
+            samples, sr = limits.decode_audio(request.audio.read(), self.settings)
+            audio.check_not_silent(samples)
+        seconds = len(samples) / sr
+        frames = max(1, math.ceil(seconds * request.fps - 1e-9))
+        limits.check_frames(frames, self.settings, what="result")
+        limits.check_frames(math.ceil(seconds * DF.FPS), self.settings, what="result")
+        clip = None
+        if request.skeleton is not None:
+            clip = load_clip(request.skeleton, self.settings, timer, mapping=request.mapping)
+        job = self._job(samples, sr, timer, genre=request.genre, seed=request.seed)
+        job.clip, job.fps, job.frames = clip, float(request.fps), frames
+        return job
+
+    def _job(
         self,
         samples: np.ndarray,
         sr: int,
         timer: StageTimer,
         *,
-        genre: str | None = None,
-        seed: int = 0,
+        genre: str | None,
+        seed: int,
         beat_warp: bool = True,
         foot_cleanup: bool = True,
-    ) -> DanceResult:
-        """A canonical motion at 30 fps covering the decoded ``samples (N,)`` at ``sr``."""
-        warnings: list[str] = []
+    ) -> DanceJob:
         with timer.stage("features"):
             frames = max(2, math.ceil(len(samples) / sr * DF.FPS - 1e-9))
             feats = audio.frame_features(samples, sr, DF.FPS, frames)
             x = self.stats.normalize_audio(feats.matrix())
-        with timer.stage("audio_network"):
-            code, probs = self.encode(x)
-        prob_map = {g: round(float(p), 4) for g, p in zip(DF.MUSIC_GENRES, probs, strict=True)}
-        given = genre is not None
-        if genre is None:
-            genre = DF.MUSIC_GENRES[int(np.argmax(probs))]
-            warnings.append(f"genre not given: predicted {genre} (p = {prob_map[genre]:.2f})")
-        vector = DF.genre_vector(genre)
-        if feats.tempo <= 0:
-            warnings.append("no beat found in the music: the dance is not beat-aligned")
         rng = np.random.default_rng(seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])
-        with timer.stage("step_network"):
-            z = self.rollout(code, vector, start, int(rng.integers(2**31)))
-        with timer.stage("decode"):
-            raw = DF.smooth_features(self.stats.denormalize_motion(z))
+        noise_seed = int(rng.integers(2**31))
+        return DanceJob(x, float(feats.tempo), feats.beats, genre, seed, start, noise_seed,
+                        beat_warp, foot_cleanup)  # fmt: skip
+
+    def predict(self, job: DanceJob, timer: StageTimer) -> DanceNetworks:
+        """The audio graph (codes, genre probabilities), the genre (the given one, else the
+        most probable), then the step graph frame by frame."""
+        with timer.stage("network"):
+            code, probs = self.encode(job.x)
+        probs_by_genre = {
+            g: round(float(p), 4) for g, p in zip(DF.MUSIC_GENRES, probs, strict=True)
+        }
+        genre = job.genre or DF.MUSIC_GENRES[int(np.argmax(probs))]
+        with timer.stage("step"):
+            poses = self.rollout(code, DF.genre_vector(genre), job.start, job.noise_seed)
+        return DanceNetworks(genre, probs_by_genre, poses)
+
+    def finish(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> Result:
+        result = self._dance(job, out, timer)
+        with timer.stage("resample"):
+            canon = K.resample_count(result.motion, job.fps, job.frames)
+        warnings = list(result.warnings)
+        warnings.append(
+            f"beat alignment {result.bas:.2f} (chance {result.bas_chance:.2f}) at "
+            f"{result.tempo:.0f} bpm"
+        )
+        if job.clip is not None:  # the rig's own skeleton, at the requested rate
+            with timer.stage("retarget_back"):
+                canon = retarget.from_canonical(canon, job.clip.rig)
+        return write_result(
+            None,
+            canon,
+            self.settings,
+            timer,
+            warnings=warnings,
+            suffix=f"dance_{job.genre or 'auto'}",
+            fps=job.fps,
+        )
+
+    def _dance(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> DanceResult:
+        """The rolled-out poses -> a canonical dance at 30 fps: low-passed, root integrated,
+        its kinematic beats warped onto the music's, feet pinned; and its beat alignment."""
+        warnings: list[str] = []
+        if job.genre is None:
+            p = out.genre_probs[out.genre]
+            warnings.append(f"genre not given: predicted {out.genre} (p = {p:.2f})")
+        if job.tempo <= 0:
+            warnings.append("no beat found in the music: the dance is not beat-aligned")
+        with timer.stage("motion"):
+            raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
             motion, _ = DF.decode(raw)
-        beats = feats.beats
-        if beat_warp and len(beats) >= 2:
+        beats = job.beats
+        if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
                 motion = BW.warp_to_beats(motion, beats).motion
-        if foot_cleanup:
+        if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
                 contacts = DF.dance_contacts(K.global_positions(motion), motion.fps)
                 motion = ik.pin_canonical_feet(motion, contacts)
@@ -147,9 +242,26 @@ class DanceEngine(Engine):
             kin = BW.kinematic_beats(K.global_positions(motion), motion.fps)
             bas = BW.beat_alignment_score(kin, beats)
             chance = BW.shifted_grid_baseline(kin, beats, draws=50).mean
-        return DanceResult(
-            motion, genre, prob_map, given, float(feats.tempo), beats, bas, chance, warnings
-        )
+        return DanceResult(motion, out.genre, out.genre_probs, job.genre is not None,
+                           job.tempo, beats, bas, chance, warnings)  # fmt: skip
+
+    def dance(
+        self,
+        samples: np.ndarray,
+        sr: int,
+        timer: StageTimer | None = None,
+        *,
+        genre: str | None = None,
+        seed: int = 0,
+        beat_warp: bool = True,
+        foot_cleanup: bool = True,
+    ) -> DanceResult:
+        """A canonical motion at 30 fps covering the decoded ``samples (N,)`` at ``sr``: the
+        three steps without an upload, for the evaluations."""
+        timer = timer or StageTimer(self.name)
+        job = self._job(samples, sr, timer, genre=genre, seed=seed, beat_warp=beat_warp,
+                        foot_cleanup=foot_cleanup)  # fmt: skip
+        return self._dance(job, self.predict(job, timer), timer)
 
 
 register_engine("dance", DanceEngine)

@@ -6,25 +6,27 @@ bundle's statistics) -> edge padding (``MARGIN`` frames each side, then up to a 
 of ``BUCKET`` frames, so onnxruntime sees few shapes and short clips still fill the
 receptive field) -> style network -> projection -> raw features -> global positions (the
 content's root trajectory, so the path is kept exactly) -> joint rotations by
-``motion.ik.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
+``motion.fit.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
 where the content's feet are planted (``motion.ik.pin_canonical_feet``).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
 from motion import canonical as C
 from motion import fast_features as FF
-from motion import ik
+from motion import fit, ik
 from motion import kinematics as K
 from motion.skeleton import Motion
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.errors import NotFound
 from service.metrics import StageTimer
+from service.pipeline import Clip, Result, Upload, load_clip, write_result
 
 BUCKET = 64  # frames: padded lengths are multiples of this
 MARGIN = 64  # frames of edge padding each side (the networks see about +-60 frames)
@@ -33,6 +35,29 @@ MARGIN = 64  # frames of edge padding each side (the networks see about +-60 fra
 def padded_length(frames: int) -> int:
     """Length the networks run at for a clip of ``frames`` frames."""
     return -(-(frames + 2 * MARGIN) // BUCKET) * BUCKET
+
+
+@dataclass
+class StylizeRequest:
+    """``POST /v1/stylize``: a content clip and one named style."""
+
+    content: Upload
+    style_name: str
+    foot_cleanup: bool = True
+    mapping: dict[str, str] | None = None
+
+
+@dataclass
+class FastJob:
+    """A prepared stylization: the clip (None for a canonical motion given directly), its
+    canonical motion, features and the padded network input ``(1, T, C)``."""
+
+    clip: Clip | None
+    canon: Motion
+    style: str
+    features: FF.Encoded
+    x: np.ndarray
+    foot_cleanup: bool
 
 
 class FastEngine(Engine):
@@ -54,48 +79,80 @@ class FastEngine(Engine):
             for name, info in sorted(self.style_info.items())
         ]
 
-    def has_style(self, name: str) -> bool:
-        return name in self.style_info
+    def accepts(self, request: StylizeRequest) -> bool:
+        return request.style_name in self.style_info
 
-    def require_style(self, name: str) -> str:
-        """The graph of style ``name``; 404 problem when this model has no such style."""
-        if name not in self.style_info:
-            raise NotFound(
-                f"no fast style named {name!r}", styles=sorted(self.style_info), model=self.name
-            )
-        return self.style_info[name]["graph"]
+    def refusal(self, request: StylizeRequest) -> NotFound:
+        return NotFound(
+            f"no fast style named {request.style_name!r}",
+            styles=sorted(self.style_info),
+            model=self.name,
+        )
 
-    def transform(self, z: np.ndarray, style: str) -> np.ndarray:
-        """Standardised features ``(T, C)`` -> styled and projected ``(T, C)`` (network only)."""
-        graph = self.require_style(style)
-        frames = len(z)
-        total = padded_length(frames)
-        before = MARGIN
-        x = np.pad(z, ((before, total - frames - before), (0, 0)), mode="edge")[None]
-        styled = self.run(graph, {"motion": x.astype(np.float32)})[0]
-        projected = self.run("projection", {"motion": styled})[0]
-        return projected[0, before : before + frames]
+    # --- the three steps ---------------------------------------------------------------------
 
-    def stylize(
-        self, canon: Motion, style: str, timer: StageTimer, foot_cleanup: bool = True
-    ) -> Motion:
-        """A canonical motion at 30 fps in ``style`` (same frames, trajectory and rate)."""
+    def prepare(self, request: StylizeRequest, timer: StageTimer) -> FastJob:
+        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping)
+        return self._job(clip.canonical, request.style_name, request.foot_cleanup, timer, clip)
+
+    def _job(
+        self,
+        canon: Motion,
+        style: str,
+        foot_cleanup: bool,
+        timer: StageTimer,
+        clip: Clip | None = None,
+    ) -> FastJob:
+        if style not in self.style_info:
+            raise self.refusal(StylizeRequest(Upload("content"), style))
         with timer.stage("features"):
-            enc = FF.encode(canon)
-            z = self.stats.normalize(enc.features)
+            features = FF.encode(canon)
+            z = self.stats.normalize(features.features)
+            frames = len(z)
+            after = padded_length(frames) - frames - MARGIN
+            x = np.pad(z, ((MARGIN, after), (0, 0)), mode="edge")[None].astype(np.float32)
+        return FastJob(clip, canon, style, features, x, foot_cleanup)
+
+    def predict(self, job: FastJob, timer: StageTimer) -> np.ndarray:
+        """The style's network, then the autoencoder's projection: ``(1, T, C)``."""
         with timer.stage("network"):
-            out = self.stats.denormalize(self.transform(z, style))
+            styled = self.run(self.style_info[job.style]["graph"], {"motion": job.x})[0]
+            return self.run("projection", {"motion": styled})[0]
+
+    def finish(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Result:
+        motion = self._motion(job, projected, timer)
+        return write_result(job.clip, motion, self.settings, timer, suffix=job.style)
+
+    def _motion(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Motion:
+        """The network's features -> a canonical motion: the content's root trajectory,
+        joint rotations fitted to the positions, feet pinned where the content's are."""
+        canon, enc = job.canon, job.features
         with timer.stage("positions"):
+            frames = canon.num_frames
+            out = self.stats.denormalize(projected[0, MARGIN : MARGIN + frames])
             out[:, FF.POSITION_CHANNELS :] = enc.features[:, FF.POSITION_CHANNELS :]
             gpos, _ = FF.decode(out, enc.start, enc.heading, fps=canon.fps)
             gpos[:, 0] = K.global_positions(canon.slice(0, 1))[0, 0]
         with timer.stage("ik"):
-            motion = ik.fit_positions(gpos, C.SKELETON, reference=canon, fps=canon.fps)
-        if foot_cleanup:
+            motion = fit.fit_positions(gpos, C.SKELETON, reference=canon, fps=canon.fps)
+        if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
                 contacts = enc.features[:, FF.CONTACTS] > 0.5
                 motion = ik.pin_canonical_feet(motion, contacts)
         return motion
+
+    def stylize(
+        self,
+        canon: Motion,
+        style: str,
+        timer: StageTimer | None = None,
+        foot_cleanup: bool = True,
+    ) -> Motion:
+        """A canonical motion at 30 fps in ``style`` (same frames, trajectory and rate): the
+        three steps without an upload, for the evaluations."""
+        timer = timer or StageTimer(self.name)
+        job = self._job(canon, style, foot_cleanup, timer)
+        return self._motion(job, self.predict(job, timer), timer)
 
 
 register_engine("fast", FastEngine)

@@ -26,6 +26,7 @@ every bow; a style's speed alone slowed an elderly clip restyled "elderly" to 0.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -39,10 +40,12 @@ from motion import features as Fe
 from motion import ik
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
+from service import limits
 from service.engines import register_engine
 from service.engines.base import Engine
-from service.errors import NotFound, ServiceError
+from service.errors import InvalidRequest, NotFound
 from service.metrics import StageTimer
+from service.pipeline import Clip, Result, Upload, load_clip, write_result
 
 BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
@@ -73,17 +76,10 @@ SAME_STYLE_NEAR, SAME_STYLE_FAR = 0.3, 0.5
 # of this length, blended with Hann weights. On the 51 held-out Bandai takes, decoding
 # each clip with its own style code gives joint positions 3.1 cm from the clip's (7.7 cm
 # a whole clip at once; 4.1 cm with 48-frame windows, 5.5 cm with 64). A bundle names its
-# training length (``extra.window``); those exported before it did trained on 32.
+# training length (``extra.window``).
 WINDOW = 32
 WINDOW_HOP = WINDOW // 2
 WINDOWS_PER_CALL = 256  # bounds the batch (memory) on long clips
-
-
-class InvalidStyle(ServiceError):
-    """A style field that is present but malformed (400 invalid-request)."""
-
-    def __init__(self, detail: str, **ext: Any) -> None:
-        super().__init__(400, "Invalid request", detail, slug="invalid-request", **ext)
 
 
 @dataclass
@@ -139,9 +135,9 @@ def parse_mix(text: str) -> dict[str, float]:
     try:
         value = json.loads(text)
     except ValueError as exc:
-        raise InvalidStyle(f"'style_mix' is not JSON: {exc}", field="style_mix") from None
+        raise InvalidRequest(f"'style_mix' is not JSON: {exc}", field="style_mix") from None
     if not isinstance(value, dict) or not value:
-        raise InvalidStyle(
+        raise InvalidRequest(
             "'style_mix' must be a non-empty JSON object of style name -> weight",
             field="style_mix",
         )
@@ -149,14 +145,93 @@ def parse_mix(text: str) -> dict[str, float]:
     for name, weight in value.items():
         number = isinstance(weight, int | float) and not isinstance(weight, bool)
         if not number or not math.isfinite(weight) or weight < 0:
-            raise InvalidStyle(
+            raise InvalidRequest(
                 f"'style_mix' weight of {name!r} must be a finite number >= 0, got {weight!r}",
                 field="style_mix",
             )
         mix[name] = float(weight)
     if sum(mix.values()) <= 0:
-        raise InvalidStyle("'style_mix' weights must have a positive sum", field="style_mix")
+        raise InvalidRequest("'style_mix' weights must have a positive sum", field="style_mix")
     return mix
+
+
+@dataclass
+class StyleSource:
+    """The one style input of a request: ``kind`` (a field of ``STYLE_FIELDS``) and what it
+    needs; files are read when the work starts."""
+
+    kind: str
+    upload: Upload | None = None
+    name: str | None = None
+    mix: dict[str, float] | None = None
+    keypoints_fps: float | None = None  # None: the document's rate, else 30
+    mapping: dict[str, str] | None = None
+
+    def names(self) -> list[str]:
+        """The named styles it refers to."""
+        return [self.name] if self.name else list(self.mix or ())
+
+
+@dataclass
+class TransferRequest:
+    """``POST /v1/transfer``: a content clip in the style of ``style``."""
+
+    content: Upload
+    style: StyleSource
+    strength: float = 1.0
+    time_warp: bool = True
+    foot_cleanup: bool = True
+    mapping: dict[str, str] | None = None
+
+
+@dataclass
+class StyleCodeRequest:
+    """``POST /v1/style-code``: the style code of one style input."""
+
+    style: StyleSource
+
+
+@dataclass
+class StyleCodeResult:
+    """A style code, the named styles nearest to it, and (set by ``Engine.infer``) the
+    model and stage timings."""
+
+    code: StyleCode
+    nearest: list[dict[str, Any]]
+    model: tuple[str, str] = ("", "")
+    timer: StageTimer | None = None
+
+
+@dataclass
+class TranslatorJob:
+    """A prepared request: the style (a code already, for names and mixes; else the style
+    network's input ``x_style`` and which graph reads it) and, for a transfer, the content:
+    its clip (None for a canonical motion given directly), features and windows."""
+
+    style: StyleCode | None
+    style_graph: str | None = None
+    x_style: np.ndarray | None = None
+    style_velocity: float | None = None
+    clip: Clip | None = None
+    content: Motion | None = None
+    features: Fe.Encoded | None = None
+    windows: np.ndarray | None = None  # (N, C, window) standardised content
+    offset: int = 0
+    length: int = 0
+    x_own: np.ndarray | None = None  # (1, C, T) the content's own style input
+    strength: float = 1.0
+    time_warp: bool = True
+    foot_cleanup: bool = True
+
+
+@dataclass
+class Networks:
+    """What :meth:`TranslatorEngine.predict` returns: the target style code, and for a
+    transfer the content's own code and the decoded windows ``(N, C, window)``."""
+
+    style: StyleCode
+    own: np.ndarray | None = None
+    decoded: np.ndarray | None = None
 
 
 class TranslatorEngine(Engine):
@@ -175,16 +250,15 @@ class TranslatorEngine(Engine):
         self.codes = np.asarray(table["codes"], dtype=np.float32)
         self.clips = [int(c) for c in table["clips"]]
         self.velocity = [float(v) for v in table["velocity"]]
-        # bundles exported before speeds existed warp named styles by velocity factors
-        self.speed = [float(v) for v in table["speed"]] if "speed" in table else None
+        self.speed = [float(v) for v in table["speed"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
         self.style_dim = int(self.codes.shape[1])
         gaps = np.linalg.norm(self.codes[:, None] - self.codes[None], axis=-1)
         # one named style: no other to tell it from, so no clip counts as in it
         self.style_gap = float(gaps[~np.eye(len(gaps), dtype=bool)].min()) if len(gaps) > 1 else 0.0
         self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
-        self.min_frames = padded_length(1, int(extra.get("receptive_field", BUCKET)))
-        self.window = int(extra.get("window", WINDOW))
+        self.min_frames = padded_length(1, int(extra["receptive_field"]))
+        self.window = int(extra["window"])
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
             raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
@@ -195,12 +269,78 @@ class TranslatorEngine(Engine):
                 "name": name,
                 "clips": self.clips[i],
                 "velocity_factor": round(self.velocity[i], 4),
-                "speed": None if self.speed is None else round(self.speed[i], 4),
+                "speed": round(self.speed[i], 4),
             }
             for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
         ]
 
-    # --- networks --------------------------------------------------------------------------
+    def accepts(self, request: TransferRequest | StyleCodeRequest) -> bool:
+        return all(name in self.index for name in request.style.names())
+
+    def refusal(self, request: TransferRequest | StyleCodeRequest) -> NotFound:
+        unknown = next(n for n in request.style.names() if n not in self.index)
+        return self._unknown(unknown)
+
+    def _unknown(self, name: str) -> NotFound:
+        return NotFound(
+            f"no translator style named {name!r}", styles=sorted(self.style_names), model=self.name
+        )
+
+    # --- prepare ---------------------------------------------------------------------------
+
+    def prepare(
+        self, request: TransferRequest | StyleCodeRequest, timer: StageTimer
+    ) -> TranslatorJob:
+        """Read the style input (a name or mix: its code; a clip or keypoints: the style
+        network's input) and, for a transfer, the content clip onto the canonical skeleton
+        and into standardised windows."""
+        job = self._style_job(request.style, timer)
+        if isinstance(request, TransferRequest):
+            clip = load_clip(request.content, self.settings, timer, mapping=request.mapping)
+            self._content_job(job, clip.canonical, timer)
+            job.clip = clip
+            job.strength = request.strength
+            job.time_warp = request.time_warp
+            job.foot_cleanup = request.foot_cleanup
+        return job
+
+    def _style_job(self, style: StyleSource, timer: StageTimer) -> TranslatorJob:
+        if style.kind == "style_name":
+            return TranslatorJob(self.code_of_name(style.name))
+        if style.kind == "style_mix":
+            return TranslatorJob(self.code_of_mix(style.mix))
+        if style.kind == "keypoints":
+            with timer.stage("style_parse"):
+                kp = limits.read_keypoints(
+                    style.upload.read(), self.settings, fps=style.keypoints_fps
+                )
+            return self._keypoints_job(kp, timer)
+        clip = load_clip(style.upload, self.settings, timer, mapping=style.mapping, prefix="style_")
+        return self._motion_job(clip.canonical, timer)
+
+    def _motion_job(self, canon: Motion, timer: StageTimer) -> TranslatorJob:
+        """The style of a canonical clip at 30 fps: its style3d input and velocity factor."""
+        with timer.stage("style_features"):
+            enc = Fe.encode(canon)
+            velocity = Fe.encoded_velocity_factor(enc, canon.fps)
+            x, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
+        return TranslatorJob(None, "style3d", x, velocity)
+
+    def _keypoints_job(self, kp: Keypoints2D, timer: StageTimer) -> TranslatorJob:
+        """The style of a video's keypoints (resampled to 30 fps); no velocity factor (a
+        video's joint speeds are in image units), so no time warp."""
+        with timer.stage("style_features"):
+            features = Fe.style2d_from_keypoints(kp)
+            x, _ = self._padded(Fe.standardize(features, self.stats, "style2d"))
+        return TranslatorJob(None, "style2d", x)
+
+    def _content_job(self, job: TranslatorJob, content: Motion, timer: StageTimer) -> None:
+        with timer.stage("features"):
+            enc = Fe.encode(content)
+            x_content = Fe.standardize(enc.content, self.stats, "content")
+            job.x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
+            job.windows, job.offset, job.length = self._windows(x_content, self.window)
+        job.content, job.features = content, enc
 
     def _padded(self, x: np.ndarray) -> tuple[np.ndarray, int]:
         """``x (F, C)`` standardised -> ``(1, C, T)`` float32 at its bucket, and the offset."""
@@ -219,6 +359,88 @@ class TranslatorEngine(Engine):
         windows = np.ascontiguousarray(windows.transpose(0, 2, 1), dtype=np.float32)
         return windows, offset, len(x)
 
+    # --- predict: every network call --------------------------------------------------------
+
+    def predict(self, job: TranslatorJob, timer: StageTimer) -> Networks:
+        """The style encoder of a clip or video, then for a transfer the content encoder on
+        the windows, the style encoder on the content (its own code) and the decoder with
+        the code ``own + strength x (target - own)``."""
+        with timer.stage("encode"):
+            style = job.style
+            if style is None:
+                name = self.sessions[job.style_graph].get_inputs()[0].name
+                code = self.run(job.style_graph, {name: job.x_style})[0][0]
+                source = "style" if job.style_graph == "style3d" else "keypoints"
+                style = self._bounded(StyleCode(code, job.style_velocity, source))
+            if job.windows is None:
+                return Networks(style)
+            latents = [
+                self.run("content_encoder", {"content": job.windows[i : i + WINDOWS_PER_CALL]})[0]
+                for i in range(0, len(job.windows), WINDOWS_PER_CALL)
+            ]
+            own = self.run("style3d", {"motion3d": job.x_own})[0][0]
+        target = np.asarray(style.code, dtype=np.float32).reshape(own.shape)
+        mixed = own + np.float32(job.strength) * (target - own)
+        with timer.stage("decode"):
+            decoded = [
+                self.run("decoder", {"code": z, "style_code": np.repeat(mixed[None], len(z), 0)})[0]
+                for z in latents
+            ]
+        return Networks(style, own, np.concatenate(decoded))
+
+    # --- finish ----------------------------------------------------------------------------
+
+    def finish(
+        self, job: TranslatorJob, out: Networks, timer: StageTimer
+    ) -> Result | StyleCodeResult:
+        if job.content is None:
+            return StyleCodeResult(out.style, self.nearest(out.style.code))
+        result = self._stylized(job, out, timer)
+        clip = job.clip
+        if result.warp != 1.0:  # the clip as sent too: its other joints follow the new timing
+            with timer.stage("time_warp"):
+                original = Fe.time_warp(clip.original, result.warp)
+            limits.check_frames(original, self.settings, what="result")
+            clip = dataclasses.replace(clip, original=original)
+        return write_result(
+            clip,
+            result.motion,
+            self.settings,
+            timer,
+            warnings=out.style.warnings + result.warnings,
+            suffix="transfer",
+        )
+
+    def _stylized(self, job: TranslatorJob, out: Networks, timer: StageTimer) -> Transfer:
+        """The decoded windows -> the canonical result: blended, smoothed, the content's root
+        trajectory, feet on the content's floor, then the time warp (module docstring)."""
+        content, enc = job.content, job.features
+        with timer.stage("rotations"):
+            blended = self._blend(out.decoded, job.length)
+            output = Fe.unstandardize(
+                blended[job.offset : job.offset + content.num_frames], self.stats, "output"
+            )
+            output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
+            motion = Fe.decode_motion(output, content, face=enc.facing)
+        if job.foot_cleanup:
+            with timer.stage("foot_cleanup"):
+                contacts = CT.canonical_foot_contacts(content)
+                motion = ik.pin_canonical_feet(motion, contacts, floor_of=content)
+        warnings: list[str] = []
+        factor = 1.0
+        if job.time_warp:
+            with timer.stage("time_warp"):
+                content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
+                speed = out.style.speed
+                if speed is not None:
+                    speed /= self.own_speed(out.own)
+                factor, warnings = self.warp_factor(
+                    out.style.velocity, content_velocity, job.strength, speed
+                )
+                if factor != 1.0:
+                    motion = Fe.time_warp(motion, factor)
+        return Transfer(motion, factor, warnings)
+
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:
         """Decoded windows ``(N, C, length)`` (as :meth:`_windows` cut them) -> ``(frames, C)``,
@@ -232,32 +454,7 @@ class TranslatorEngine(Engine):
             total[start : start + length] += weight
         return (out / total).astype(np.float32)
 
-    def _style_net(self, graph: str, kind: str, features: np.ndarray) -> np.ndarray:
-        x, _ = self._padded(Fe.standardize(features, self.stats, kind))
-        name = self.sessions[graph].get_inputs()[0].name
-        return self.run(graph, {name: x})[0][0]
-
     # --- style codes -----------------------------------------------------------------------
-
-    def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
-        """The 3D style code and velocity factor of a canonical clip at 30 fps."""
-        timer = timer or StageTimer(self.name)
-        with timer.stage("style_features"):
-            enc = Fe.encode(canon)
-            velocity = Fe.encoded_velocity_factor(enc, canon.fps)
-        with timer.stage("style_encode"):
-            code = self._style_net("style3d", "style3d", enc.style3d)
-        return self._bounded(StyleCode(code, velocity, "style"))
-
-    def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
-        """The 2D style code of a video's keypoints (resampled to 30 fps); no velocity
-        factor (a video's joint speeds are in image units), so no time warp."""
-        timer = timer or StageTimer(self.name)
-        with timer.stage("style_features"):
-            features = Fe.style2d_from_keypoints(kp)
-        with timer.stage("style_encode"):
-            code = self._style_net("style2d", "style2d", features)
-        return self._bounded(StyleCode(code, None, "keypoints"))
 
     def _bounded(self, style: StyleCode) -> StyleCode:
         """``style`` with its code scaled down to ``max_code_norm`` (and a warning) when
@@ -273,35 +470,30 @@ class TranslatorEngine(Engine):
         )
         return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
-    def require_style(self, name: str) -> int:
-        """The table row of style ``name``; 404 problem listing the known styles if none."""
-        if name not in self.index:
-            raise NotFound(
-                f"no translator style named {name!r}",
-                styles=sorted(self.style_names),
-                model=self.name,
-            )
-        return self.index[name]
-
     def code_of_name(self, name: str) -> StyleCode:
-        i = self.require_style(name)
-        speed = None if self.speed is None else self.speed[i]
-        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=speed)
+        if name not in self.index:
+            raise self._unknown(name)
+        i = self.index[name]
+        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=self.speed[i])
 
     def code_of_mix(self, mix: dict[str, float]) -> StyleCode:
         """Weighted mean of named codes (and of their velocity factors; geometric mean of
-        their speeds); weights >= 0 with a positive sum, normalised here; unknown names 404."""
-        rows = [self.require_style(name) for name in mix]
+        their speeds); weights >= 0 with a positive sum (:func:`parse_mix`), normalised."""
+        for name in mix:
+            if name not in self.index:
+                raise self._unknown(name)
+        rows = [self.index[name] for name in mix]
         weights = np.array(list(mix.values()), dtype=np.float64)
-        if not np.all(np.isfinite(weights)) or (weights < 0).any() or weights.sum() <= 0:
-            raise InvalidStyle("'style_mix' weights must be >= 0 with a positive sum")
         weights /= weights.sum()
         code = (weights[:, None] * self.codes[rows].astype(np.float64)).sum(axis=0)
         velocity = float(np.dot(weights, [self.velocity[i] for i in rows]))
-        speed = None
-        if self.speed is not None:
-            speed = float(np.exp(np.dot(weights, np.log([self.speed[i] for i in rows]))))
+        speed = float(np.exp(np.dot(weights, np.log([self.speed[i] for i in rows]))))
         return StyleCode(code.astype(np.float32), velocity, "style_mix", speed=speed)
+
+    def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
+        """The 3D style code and velocity factor of a canonical clip at 30 fps."""
+        timer = timer or StageTimer(self.name)
+        return self.predict(self._motion_job(canon, timer), timer).style
 
     def nearest(self, code: np.ndarray, count: int = NEAREST) -> list[dict[str, Any]]:
         """The ``count`` named styles nearest to ``code`` (Euclidean), nearest first."""
@@ -314,8 +506,8 @@ class TranslatorEngine(Engine):
     def own_speed(self, own: np.ndarray) -> float:
         """The speed of the named style a clip's own code ``own`` is in: that style's within
         ``SAME_STYLE_NEAR`` x the smallest gap between named codes, 1 (no style) beyond
-        ``SAME_STYLE_FAR`` x it, geometrically between; 1 for bundles without speeds."""
-        if self.speed is None or self.style_gap <= 0:
+        ``SAME_STYLE_FAR`` x it, geometrically between."""
+        if self.style_gap <= 0:
             return 1.0
         distances = np.linalg.norm(self.codes - np.asarray(own, dtype=np.float32), axis=1)
         i = int(np.argmin(distances))
@@ -362,52 +554,16 @@ class TranslatorEngine(Engine):
         timer: StageTimer | None = None,
         style_speed: float | None = None,
     ) -> Transfer:
-        """``content`` (canonical, 30 fps) in the style of ``code ``(S,)``; see the module
-        docstring. The time warp is ``style_speed`` over the content's :meth:`own_speed`
-        (named styles) or the ratio of velocity factors (style clips); neither means no time
-        warp (with a warning if asked)."""
+        """``content`` (canonical, 30 fps) in the style of ``code (S,)``, canonical out: the
+        three steps without uploads, for the evaluations. The time warp is ``style_speed``
+        over the content's :meth:`own_speed` (named styles) or the ratio of velocity factors
+        (style clips); neither means no time warp (with a warning if asked)."""
         timer = timer or StageTimer(self.name)
-        frames = content.num_frames
-        with timer.stage("features"):
-            enc = Fe.encode(content)
-            x_content = Fe.standardize(enc.content, self.stats, "content")
-            x_style, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
-        with timer.stage("encode"):
-            windows, offset, length = self._windows(x_content, self.window)
-            latents = [
-                self.run("content_encoder", {"content": windows[i : i + WINDOWS_PER_CALL]})[0]
-                for i in range(0, len(windows), WINDOWS_PER_CALL)
-            ]
-            own = self.run("style3d", {"motion3d": x_style})[0][0]
-        target = np.asarray(code, dtype=np.float32).reshape(own.shape)
-        mixed = own + np.float32(strength) * (target - own)
-        with timer.stage("decode"):
-            decoded = [
-                self.run("decoder", {"code": z, "style_code": np.repeat(mixed[None], len(z), 0)})[0]
-                for z in latents
-            ]
-        with timer.stage("rotations"):
-            out = self._blend(np.concatenate(decoded), length)
-            output = Fe.unstandardize(out[offset : offset + frames], self.stats, "output")
-            output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
-            motion = Fe.decode_motion(output, content, face=enc.facing)
-        if foot_cleanup:
-            with timer.stage("foot_cleanup"):
-                contacts = CT.canonical_foot_contacts(content)
-                motion = ik.pin_canonical_feet(motion, contacts, floor_of=content)
-        warnings: list[str] = []
-        factor = 1.0
-        if time_warp:
-            with timer.stage("time_warp"):
-                content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
-                if style_speed is not None:
-                    style_speed /= self.own_speed(own)
-                factor, warnings = self.warp_factor(
-                    style_velocity, content_velocity, strength, style_speed
-                )
-                if factor != 1.0:
-                    motion = Fe.time_warp(motion, factor)
-        return Transfer(motion, factor, warnings)
+        style = StyleCode(np.asarray(code, np.float32), style_velocity, "code", speed=style_speed)
+        job = TranslatorJob(style, strength=strength, time_warp=time_warp)
+        job.foot_cleanup = foot_cleanup
+        self._content_job(job, content, timer)
+        return self._stylized(job, self.predict(job, timer), timer)
 
 
 register_engine("translator", TranslatorEngine)

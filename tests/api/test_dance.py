@@ -107,7 +107,7 @@ def test_fps_json_and_predicted_genre(client):
     assert body["frames"] == math.ceil(3.1 * 24) and body["fps"] == 24
     assert any("predicted" in w for w in body["warnings"])
     assert bvh.loads(body["bvh"]).num_frames == body["frames"]
-    assert {"features", "step_network", "decode"} <= set(body["timings_ms"])
+    assert {"features", "network", "step", "motion"} <= set(body["timings_ms"])
 
 
 def test_seed_gives_variation_and_is_reproducible(client):

@@ -10,8 +10,11 @@ from fastapi import FastAPI
 
 from motion.errors import MotionError
 from service.errors import (
+    CATALOGUE,
+    InvalidRequest,
     NotFound,
     NotReady,
+    Overloaded,
     PayloadTooLarge,
     ServiceError,
     Timeout,
@@ -25,7 +28,8 @@ SERVICE_ERRORS = {
     "unsupported-media-type": UnsupportedMediaType("audio/x-foo is not read"),
     "not-ready": NotReady("models are loading"),
     "timeout": Timeout("took too long", limit=60),
-    "plain": ServiceError(409, "Conflict", "already there"),
+    "invalid-request": InvalidRequest("'mapping' is not JSON", field="mapping"),
+    "overloaded": Overloaded("no slot", headers={"Retry-After": "5"}),
 }
 
 
@@ -94,16 +98,31 @@ def test_motion_errors_map_by_kind(error_client, kind, status, slug):
         ("unsupported-media-type", 415),
         ("not-ready", 503),
         ("timeout", 504),
-        ("plain", 409),
+        ("invalid-request", 400),
+        ("overloaded", 503),
     ],
 )
 def test_service_errors_are_problems(error_client, name, status):
     exc = SERVICE_ERRORS[name]
-    body = assert_problem(error_client.get(f"/_test/service/{name}"), status)
-    assert body["title"] == exc.title
+    response = error_client.get(f"/_test/service/{name}")
+    body = assert_problem(response, status, name)
+    assert body["title"] == exc.title == CATALOGUE[name].title
     assert body["detail"] == exc.detail
     for key, value in exc.ext.items():
         assert body[key] == value
+    for key, value in exc.headers.items():
+        assert response.headers[key] == value
+
+
+def test_every_service_error_class_names_a_catalogue_entry():
+    classes, stack = set(), [ServiceError]
+    while stack:
+        cls = stack.pop()
+        classes.add(cls)
+        stack.extend(cls.__subclasses__())
+    assert {cls.slug for cls in classes} <= set(CATALOGUE)
+    slugs = [cls.slug for cls in classes if cls is not ServiceError]
+    assert len(slugs) == len(set(slugs)), "two classes for one problem type"
 
 
 def test_validation_error_is_400_with_field_errors(error_client):

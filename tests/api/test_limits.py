@@ -11,10 +11,10 @@ import pytest
 import soundfile
 from fastapi import FastAPI, File, Request, UploadFile
 
+from motion import bvh
 from service import limits
 from service.config import Settings
 from service.errors import PayloadTooLarge
-from service.inference import run_inference
 from tests.api.helpers import assert_problem
 from tests.robustness.corpus import TINY_BVH, keypoint_json, keypoint_zip
 
@@ -34,19 +34,20 @@ def add_limit_routes(app: FastAPI) -> None:
     @app.post("/_test/bvh")
     async def post_bvh(request: Request, content: UploadFile = File()):
         data = await content.read()
-        motion = await run_inference(request, limits.read_bvh, data, settings, what="content")
+        motion = await request.app.state.runner.run(bvh.loads, data)
+        limits.check_frames(motion, settings, what="content")
         return {"frames": motion.num_frames}
 
     @app.post("/_test/audio")
     async def post_audio(request: Request, audio: UploadFile = File()):
         data = await audio.read()
-        samples, sr = await run_inference(request, limits.decode_audio, data, settings)
+        samples, sr = await request.app.state.runner.run(limits.decode_audio, data, settings)
         return {"seconds": limits.check_audio_seconds(samples, settings, sr)}
 
     @app.post("/_test/keypoints")
     async def post_keypoints(request: Request, keypoints: UploadFile = File()):
         data = await keypoints.read()
-        kp = await run_inference(request, limits.read_keypoints, data, settings)
+        kp = await request.app.state.runner.run(limits.read_keypoints, data, settings)
         return {"frames": kp.num_frames}
 
     @app.get("/_test/result")

@@ -16,7 +16,6 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from service import metrics
 from service.config import Settings
-from service.inference import run_inference
 from service.log import JsonFormatter, RequestIdFilter, log_config
 from service.manifest import Manifest
 from tests.api.helpers import assert_problem, write_tiny_model
@@ -101,7 +100,7 @@ def add_stage_route(app: FastAPI) -> None:
             metrics.count_frames("/_test/stages", "test-model", 240)
             return timer
 
-        timer = await run_inference(request, work)
+        timer = await request.app.state.runner.run(work)
         return {"server_timing": timer.server_timing(), "ms": timer.ms}
 
 

@@ -40,7 +40,7 @@ def test_a_good_model_is_loaded_warmed_and_listed(make_client, tmp_path):
     assert response.json()["models"] == [
         {"name": "tiny", "family": "fast", "version": "0.0.1", "status": "ready"}
     ]
-    engine = client.app.state.registry.get("tiny")
+    engine = client.app.state.registry.engines["tiny"]
     assert type(engine) is GenericEngine
     assert set(engine.warmup_ms) == {"net"}
     session = engine.sessions["net"]
@@ -174,10 +174,11 @@ def test_an_engine_factory_serves_its_family(make_client, tmp_path):
         "dance": [],
     }
     registry = client.app.state.registry
-    assert isinstance(registry.get("tiny"), StyledEngine)
+    assert isinstance(registry.engines["tiny"], StyledEngine)
     assert [e.name for e in registry.by_family("fast")] == ["tiny"]
-    with pytest.raises(NotFound):
-        registry.get("nope")
+    assert registry.engine_for("fast") is registry.engines["tiny"]
+    with pytest.raises(NotFound, match="no translator model"):
+        registry.engine_for("translator")
 
 
 def test_register_engine(make_client, tmp_path):
@@ -189,7 +190,7 @@ def test_register_engine(make_client, tmp_path):
     register_engine("dance", StyledEngine)
     try:
         client = make_client(settings_for(tmp_path))
-        assert isinstance(client.app.state.registry.get("tiny"), StyledEngine)
+        assert isinstance(client.app.state.registry.engines["tiny"], StyledEngine)
         assert client.get("/v1/styles").json()["dance"][0]["name"] == "happy"
     finally:
         if previous is None:
@@ -210,5 +211,5 @@ def test_only_the_graphs_an_engine_names_busy_wait_between_runs(make_client, tmp
     for engines, want in ((NO_ENGINES, "0"), ({"fast": SpinningEngine}, "1")):
         client = make_client(settings_for(tmp_path), engines)
         assert client.get("/readyz").status_code == 200
-        session = client.app.state.registry.get("tiny").sessions["net"]
+        session = client.app.state.registry.engines["tiny"].sessions["net"]
         assert session.get_session_options().get_session_config_entry(spinning) == want

@@ -27,13 +27,13 @@ from service.engines.translator import (
     SAME_STYLE_NEAR,
     WINDOW,
     WINDOW_HOP,
-    InvalidStyle,
     TranslatorEngine,
     pad_mirrored,
     padded_length,
     parse_mix,
     window_starts,
 )
+from service.errors import InvalidRequest
 from tests import rigs
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
@@ -202,7 +202,7 @@ def test_parse_mix():
     assert parse_mix('{"happy": 2, "old": 0}') == {"happy": 2.0, "old": 0.0}
     for bad in ("{not json", "[1]", "{}", '{"a": -1}', '{"a": "x"}', '{"a": true}',
                 '{"a": 0, "b": 0}', '{"a": NaN}', '{"a": 1e999}'):  # fmt: skip
-        with pytest.raises(InvalidStyle):
+        with pytest.raises(InvalidRequest):
             parse_mix(bad)
 
 

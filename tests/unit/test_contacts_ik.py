@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motion import bvh, ik, retarget
+from motion import bvh, fit, ik, retarget
 from motion import canonical as C
 from motion import contacts as CT
 from motion import kinematics as K
@@ -477,12 +477,12 @@ def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
 def test_fit_positions_recovers_a_real_motion(walk):
     gpos = K.global_positions(walk)
     height = C.SKELETON.height()
-    fitted = ik.fit_positions(gpos, C.SKELETON, reference=walk)
+    fitted = fit.fit_positions(gpos, C.SKELETON, reference=walk)
     assert np.abs(K.global_positions(fitted) - gpos).max() < 1e-6 * height
     assert rot.angle(rot.mul(rot.inv(walk.lrot), fitted.lrot)).max() < 1e-5
     assert fitted.fps == walk.fps
 
-    free = ik.fit_positions(gpos, C.SKELETON)
+    free = fit.fit_positions(gpos, C.SKELETON)
     assert np.abs(K.global_positions(free) - gpos).max() < 1e-6 * height
     # pelvis and chest are fixed by their several bones, twist and all
     grot, grot_free = K.global_rotations(walk), K.global_rotations(free)
@@ -495,7 +495,7 @@ def test_fit_positions_on_noisy_targets_keeps_bones_rigid(walk):
     gpos = K.global_positions(walk)
     noisy = gpos + np.random.default_rng(3).normal(scale=1.0, size=gpos.shape)  # 1 cm
     target_before = noisy.copy()
-    fitted = ik.fit_positions(noisy, C.SKELETON)
+    fitted = fit.fit_positions(noisy, C.SKELETON)
     np.testing.assert_array_equal(noisy, target_before)
     fit_gpos = K.global_positions(fitted)
     lengths = np.linalg.norm(C.OFFSETS[2:], axis=-1)  # every bone below the hips
@@ -507,7 +507,7 @@ def test_fit_positions_on_noisy_targets_keeps_bones_rigid(walk):
 
 def test_fit_positions_on_a_skeleton_with_zero_length_bones(cmu_walk):
     gpos = K.global_positions(cmu_walk)
-    fitted = ik.fit_positions(gpos, cmu_walk.skeleton, fps=cmu_walk.fps)
+    fitted = fit.fit_positions(gpos, cmu_walk.skeleton, fps=cmu_walk.fps)
     assert np.abs(K.global_positions(fitted) - gpos).max() < 1e-6 * cmu_walk.skeleton.height()
     with pytest.raises(MotionError):
-        ik.fit_positions(gpos[:, :-1], cmu_walk.skeleton)
+        fit.fit_positions(gpos[:, :-1], cmu_walk.skeleton)
