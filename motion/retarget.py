@@ -82,8 +82,8 @@ def _pose_score(gpos: np.ndarray, m: dict[str, int]) -> np.ndarray:
     return score
 
 
-def _rest_is_usable(skeleton: Skeleton, m: dict[str, int]) -> bool:
-    rest = skeleton.rest_positions()
+def _rest_is_usable(rest: np.ndarray, m: dict[str, int]) -> bool:
+    """Whether rest positions ``(J, 3)`` stand like a humanoid (legs straight down)."""
     if np.linalg.norm(rest[m["Chest"]] - rest[m["Hips"]]) < 1e-6:
         return False
     return bool(_pose_score(rest, m) > 3.5)  # 4 for straight legs; arms add up to 1
@@ -94,7 +94,7 @@ class _Correction:
     """A mapped joint whose mapped children hang from it through joints in between."""
 
     joint: int  # the mapped joint
-    children: np.ndarray  # (n,) its mapped children (canonical children, mapped)
+    paths: tuple[tuple[int, ...], ...]  # per mapped child: the joints from it up to below joint
     reference: np.ndarray  # (n, 3) where the reference pose puts them, in the joint's frame
     weights: np.ndarray  # (n,)
 
@@ -111,12 +111,31 @@ def _fit_rotation(reference: np.ndarray, now: np.ndarray, weights: np.ndarray) -
     return rot.from_matrix(u @ vt)
 
 
-def _correction(c: _Correction, grot: np.ndarray, gpos: np.ndarray) -> np.ndarray:
-    """The correction's rotation ``(F, 4)`` for poses with globals ``grot``, ``gpos``."""
-    now = rot.apply(
-        rot.inv(grot[:, c.joint])[:, None], gpos[:, c.children] - gpos[:, c.joint, None]
-    )
+def _correction(c: _Correction, lrot: np.ndarray, lpos: np.ndarray) -> np.ndarray:
+    """The correction's rotation ``(F, 4)`` for a clip's local rotations and translations:
+    only the joints in between matter, and where they do not move it is computed once."""
+    now = []
+    for path in c.paths:  # child first: its place in the frame of the joint at the top
+        v = lpos[:, path[0]]
+        for k in path[1:]:
+            v = rot.apply(lrot[:, k], v) + lpos[:, k]
+        now.append(v)
+    now = np.stack(now, axis=1)
+    if not (now != now[:1]).any():
+        return np.broadcast_to(_fit_rotation(c.reference, now[:1], c.weights), (len(now), 4))
     return _fit_rotation(c.reference, now, c.weights)
+
+
+def _world_rotations(lrot: np.ndarray, parents: np.ndarray, needed: np.ndarray) -> np.ndarray:
+    """World rotations ``(F, J, 4)`` of the ``needed`` joints (whose parents are needed
+    too), a level of the hierarchy at a time; the others are left unset."""
+    grot = np.empty(lrot.shape)
+    grot[:, 0] = lrot[:, 0]
+    for joints, above in K.levels(parents):
+        keep = needed[joints]
+        if keep.any():
+            grot[:, joints[keep]] = rot.mul(grot[:, above[keep]], lrot[:, joints[keep]])
+    return grot
 
 
 @dataclass(frozen=True)
@@ -178,70 +197,43 @@ def make_rig(
 
     The reference pose is ``reference_lrot`` if given, else the rest pose when it is
     a usable standing pose, else Bandai's standing pose for its rig, else the most
-    upright frame of ``motion``.
+    upright of the clip's frames (64 spread over ``motion``).
     """
-    found = rig_mapping.find_mapping(skeleton, motion, mapping)
+    frames, sampled = None, np.zeros(0, dtype=int)
+    if motion is not None and motion.num_frames:
+        sampled = rig_mapping.sample_indices(motion.num_frames)
+        frames = K.fk(motion.lrot[sampled], motion.lpos[sampled], skeleton.parents)
+    found = rig_mapping.find_mapping(skeleton, motion, mapping, frames=frames)
     m = found.joints
     nj = skeleton.num_joints
+    rest = skeleton.rest_positions()
+    height = float(max(np.ptp(rest, axis=0).max(), 1e-6))
     how = "given"
     if reference_lrot is None:
-        if _rest_is_usable(skeleton, m):
+        if _rest_is_usable(rest, m):
             reference_lrot, how = rot.identity((nj,)), "rest"
         elif skeleton.names == C.JOINTS:  # Bandai's own rig: its rest pose lies along X
             reference_lrot, how = C.BANDAI_REFERENCE_LROT, "registered"
-        elif motion is not None:
-            step = max(1, motion.num_frames // 200)
-            sub = motion.lrot[::step]
-            gpos = K.fk(sub, skeleton.offsets[None], skeleton.parents)[1]
-            best = int(np.argmax(_pose_score(gpos, m)))
-            reference_lrot, how = sub[best].copy(), f"frame {best * step}"
+        elif frames is not None:
+            best = int(np.argmax(_pose_score(frames[1], m)))
+            reference_lrot, how = motion.lrot[sampled[best]].copy(), f"frame {sampled[best]}"
         else:
             reference_lrot, how = rot.identity((nj,)), "rest"
     reference_lrot = rot.normalize(reference_lrot)
-    if motion is not None and (how == "rest" or how.startswith("frame")):
+    if frames is not None and (how == "rest" or how.startswith("frame")):
         # joints between mapped ones hold their usual pose: some rigs keep a pelvis or
         # neck bone turned throughout, and a clip retargeted without its own clip to
         # follow (``from_canonical`` without ``like``) must land mapped joints there too
         between = _joints_between(skeleton, m)
         if len(between):
-            step = max(1, motion.num_frames // 200)
             reference_lrot = reference_lrot.copy()
-            reference_lrot[between] = rot.mean(motion.lrot[::step, between])
+            reference_lrot[between] = rot.mean(motion.lrot[sampled][:, between])
     grot, gpos = K.fk(reference_lrot, skeleton.offsets, skeleton.parents)
-    frame = body_frame(gpos, m)
-    to_body = rot.from_matrix(frame.T)  # world -> canonical axes
-    templates = C.template_directions()
-    tpose = rot.identity((nj,))
-    swings: dict[str, np.ndarray] = {}
-    for cname in C.JOINTS:
-        if cname not in m:
-            continue
-        j = m[cname]
-        swing = None
-        child = C.MAIN_CHILD.get(cname)
-        while child is not None and child not in m:  # skip unmapped canonical joints
-            child = C.MAIN_CHILD.get(child)
-        if child is not None and cname in templates:
-            bone = gpos[m[child]] - gpos[j]
-            if np.linalg.norm(bone) > 1e-6 * max(skeleton.height(), 1e-6):
-                swing = rot.between(
-                    frame.T @ bone,
-                    _CANONICAL_REST[C.INDEX[child]] - _CANONICAL_REST[C.INDEX[cname]],
-                )
-        if swing is None and cname in _TIP_TEMPLATES:  # hand, or foot without toes
-            tip = _tip_vector(skeleton, j, grot, gpos)
-            if tip is not None:
-                swing = rot.between(frame.T @ tip, _TIP_TEMPLATES[cname])
-        if swing is None:  # leaf or degenerate bone: move rigidly with the parent's swing
-            parent = C.PARENTS[C.INDEX[cname]]
-            swing = swings.get(C.JOINTS[parent], rot.IDENTITY) if parent >= 0 else rot.IDENTITY
-        swings[cname] = swing
-        tpose[j] = rot.mul(swing, rot.mul(to_body, grot[j]))
+    tpose = _tpose(skeleton, m, grot, gpos, height)
     leg = 0.0
     for s in ("L", "R"):
         path = _chain(skeleton.parents, m[f"UpperLeg_{s}"], m[f"Foot_{s}"])
         leg += sum(np.linalg.norm(skeleton.offsets[k]) for k in path) / 2.0
-    up = _upright(skeleton, m, motion)
     return Rig(
         skeleton,
         m,
@@ -249,12 +241,57 @@ def make_rig(
         reference_lrot,
         max(float(leg), 1e-9),
         how,
-        up,
+        _upright(rest, m, frames),
         found.method,
         found.confidence,
         found.convention,
-        _corrections(skeleton, m, grot, gpos),
+        _corrections(skeleton, m, grot, gpos, height),
     )
+
+
+def _tpose(
+    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray, height: float
+) -> np.ndarray:
+    """Per joint ``(J, 4)``, the world rotation from the reference pose (``grot``, ``gpos``)
+    into the canonical T-pose: into the body's axes, then a swing of the joint's bone (to
+    its mapped child, else to its fingers or toe tip) onto the template direction; joints
+    with neither swing with their parent."""
+    frame = body_frame(gpos, m)
+    to_body = rot.from_matrix(frame.T)  # world -> canonical axes
+    templates = C.template_directions()
+    names, bones, targets = [], [], []
+    for cname in C.JOINTS:
+        if cname not in m:
+            continue
+        j = m[cname]
+        child = C.MAIN_CHILD.get(cname)
+        while child is not None and child not in m:  # skip unmapped canonical joints
+            child = C.MAIN_CHILD.get(child)
+        if child is not None and cname in templates:
+            bone = gpos[m[child]] - gpos[j]
+            if np.linalg.norm(bone) > 1e-6 * height:
+                names.append(cname)
+                bones.append(frame.T @ bone)
+                targets.append(_CANONICAL_REST[C.INDEX[child]] - _CANONICAL_REST[C.INDEX[cname]])
+                continue
+        if cname in _TIP_TEMPLATES:  # hand, or foot without toes
+            tip = _tip_vector(skeleton, j, grot, gpos, height)
+            if tip is not None:
+                names.append(cname)
+                bones.append(frame.T @ tip)
+                targets.append(_TIP_TEMPLATES[cname])
+    swings = dict(zip(names, rot.between(np.array(bones), np.array(targets)), strict=True))
+    tpose = rot.identity((skeleton.num_joints,))
+    for cname in C.JOINTS:  # parents first
+        if cname not in m:
+            continue
+        if cname not in swings:  # leaf or degenerate bone: move rigidly with the parent's swing
+            parent = C.PARENTS[C.INDEX[cname]]
+            swings[cname] = (
+                swings.get(C.JOINTS[parent], rot.IDENTITY) if parent >= 0 else rot.IDENTITY
+            )
+        tpose[m[cname]] = rot.mul(swings[cname], rot.mul(to_body, grot[m[cname]]))
+    return tpose
 
 
 def _joints_between(skeleton: Skeleton, m: dict[str, int]) -> np.ndarray:
@@ -279,37 +316,40 @@ def _mapped_children(cname: str, m: dict[str, int]) -> list[str]:
 
 
 def _corrections(
-    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray
+    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray, height: float
 ) -> tuple[_Correction, ...]:
     """A correction for each mapped joint with a mapped child below joints that can move."""
     movable = np.array([len(ch) > 0 for ch in skeleton.channels])
-    tiny = 1e-6 * max(skeleton.height(), 1e-6)
+    tiny = 1e-6 * height
     out = []
     for cname, j in m.items():
         if cname == "joint_Root":
             continue
         children = [m[c] for c in _mapped_children(cname, m)]
-        between = [_chain(skeleton.parents, j, k)[1:] for k in children]
-        if not any(movable[b].any() for b in between if b):
+        paths = [tuple(_chain(skeleton.parents, j, k)) for k in children]  # child first
+        if not any(movable[list(p[1:])].any() for p in paths if len(p) > 1):
             continue
         ref = rot.apply(rot.inv(grot[j]), gpos[children] - gpos[j])
         lengths = np.linalg.norm(ref, axis=-1)
         keep = lengths > tiny
         if keep.any():
-            out.append(_Correction(j, np.array(children)[keep], ref[keep], lengths[keep]))
+            kept = tuple(p for p, k in zip(paths, keep, strict=True) if k)
+            out.append(_Correction(j, kept, ref[keep], lengths[keep]))
     return tuple(out)
 
 
-def _upright(skeleton: Skeleton, m: dict[str, int], motion: Motion | None) -> np.ndarray:
+def _upright(
+    rest: np.ndarray, m: dict[str, int], frames: tuple[np.ndarray, np.ndarray] | None
+) -> np.ndarray:
     """Rotation taking the file's world to Y-up: identity unless the body stands along
     another axis (Z-up exports of 3ds Max and Blender). A rest pose that stands must
-    stand along it and the motion too: Bandai's rest lies along X in a Y-up world, and a
-    Y-up clip of someone lying down stands along no axis in its rest pose's direction.
-    A rest pose that does not stand (rotated joint frames) leaves it to the motion."""
-    rest = skeleton.rest_positions()
+    stand along it and the clip's ``frames`` (world rotations, positions) too: Bandai's
+    rest lies along X in a Y-up world, and a Y-up clip of someone lying down stands along
+    no axis in its rest pose's direction. A rest pose that does not stand (rotated joint
+    frames) leaves it to the clip."""
     spine = rest[m["Chest"]] - rest[m["Hips"]]
     length = np.linalg.norm(spine)
-    standing_rest = length > 1e-9 and _rest_is_usable(skeleton, m)
+    standing_rest = length > 1e-9 and _rest_is_usable(rest, m)
     axis = np.zeros(3)
     if standing_rest:
         spine = spine / length
@@ -317,12 +357,11 @@ def _upright(skeleton: Skeleton, m: dict[str, int], motion: Motion | None) -> np
         if i == 1 or abs(spine[i]) < 0.9:
             return rot.IDENTITY.copy()
         axis[i] = np.sign(spine[i])
-        if motion is None:
+        if frames is None:
             return rot.between(axis, np.array([0.0, 1.0, 0.0]))
-    elif motion is None:
+    elif frames is None:
         return rot.IDENTITY.copy()
-    step = max(1, motion.num_frames // 200)
-    gpos = K.fk(motion.lrot[::step], motion.lpos[::step], skeleton.parents)[1]
+    gpos = frames[1]
     ups = gpos[:, m["Chest"]] - gpos[:, m["Hips"]]
     ups /= np.maximum(np.linalg.norm(ups, axis=-1, keepdims=True), 1e-9)
     if not standing_rest:
@@ -345,7 +384,7 @@ _TIP_TEMPLATES = {
 
 
 def _tip_vector(
-    skeleton: Skeleton, j: int, grot: np.ndarray, gpos: np.ndarray
+    skeleton: Skeleton, j: int, grot: np.ndarray, gpos: np.ndarray, height: float
 ) -> np.ndarray | None:
     """World vector from joint ``j`` to the mean of its descendants and End Sites
     (fingers for a hand, the toe End Site for a foot), or None if it has none."""
@@ -360,7 +399,7 @@ def _tip_vector(
     if not points:
         return None
     tip = np.mean(points, axis=0) - gpos[j]
-    return tip if np.linalg.norm(tip) > 1e-4 * skeleton.height() else None
+    return tip if np.linalg.norm(tip) > 1e-4 * height else None
 
 
 def _chain(parents: np.ndarray, top: int, bottom: int) -> list[int]:
@@ -389,29 +428,44 @@ def _canonical_sources(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     return np.array(mapped), source[1:]
 
 
+def _above_mapped(parents: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Mask of the mapped ``joints`` and everything above them."""
+    needed = np.zeros(len(parents), dtype=bool)
+    for j in joints:
+        while j >= 0 and not needed[j]:
+            needed[j] = True
+            j = int(parents[j])
+    return needed
+
+
 def to_canonical(motion: Motion, rig: Rig | None = None, fps: float | None = C.FPS) -> Motion:
     """The motion on the canonical skeleton (at ``fps``; ``None`` keeps the clip's rate)."""
     rig = rig or make_rig(motion.skeleton, motion)
-    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
-    # the T-pose rotations do not depend on the world's orientation, so turning a Z-up
-    # world upright is one rotation of every global
-    grot, gpos = rot.mul(rig.up, grot), rot.apply(rig.up, gpos)
+    parents = motion.skeleton.parents
     frames = motion.num_frames
     mapped, source = _canonical_sources(rig)
     joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
-    g = grot[:, joints]
+    grot = _world_rotations(motion.lrot, parents, _above_mapped(parents, joints))
+    hips = rig.mapping["Hips"]
+    hips_pos = motion.lpos[:, hips]  # in the world: up the chain above the hips
+    p = int(parents[hips])
+    while p >= 0:
+        hips_pos = motion.lpos[:, p] + rot.apply(motion.lrot[:, p], hips_pos)
+        p = int(parents[p])
+    # the T-pose rotations do not depend on the world's orientation, so turning a Z-up
+    # world upright is one rotation of every global
+    g = rot.mul(rig.up, grot[:, joints])
     for c in rig.corrections:
         i = int(np.nonzero(joints == c.joint)[0][0])
-        g[:, i] = rot.mul(g[:, i], _correction(c, grot, gpos))
+        g[:, i] = rot.mul(g[:, i], _correction(c, motion.lrot, motion.lpos))
     canon = rot.mul(g, rot.inv(rig.tpose[joints]))
     cgrot = rot.identity((frames, len(C.JOINTS)))  # the canonical root stays unrotated
     cgrot[:, 1:] = canon[:, source]
     clrot = K.local_from_global(cgrot, C.PARENTS)
     clrot[:, 0] = rot.IDENTITY
-    scale = C.leg_length() / rig.leg_length
     clpos = np.repeat(C.OFFSETS[None], frames, axis=0)
     clpos[:, 0] = 0.0  # on the floor; the hips carry the path
-    clpos[:, 1] = gpos[:, rig.mapping["Hips"]] * scale
+    clpos[:, 1] = rot.apply(rig.up, hips_pos) * (C.leg_length() / rig.leg_length)
     out = Motion(C.SKELETON, motion.fps, rot.make_continuous(clrot), clpos)
     if fps is not None:
         out = K.resample(out, fps)
@@ -428,49 +482,46 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
     sk = rig.skeleton
     parents = sk.parents
     if like is not None:
-        canon = K.resample_count(canon, like.fps, like.num_frames)
+        if abs(canon.fps - like.fps) > 1e-4 * like.fps or canon.num_frames != like.num_frames:
+            canon = K.resample_count(canon, like.fps, like.num_frames)
+        else:  # same timing (30 vs 1/0.0333333 counts as the same): nothing to resample
+            canon = canon.replace(fps=like.fps)
     frames = canon.num_frames
-    cgrot, cgpos = K.fk(canon.lrot, canon.lpos, C.PARENTS)
     if like is not None:
         own_lrot, own_lpos = like.lrot.copy(), like.lpos.copy()
     else:
         own_lrot = np.repeat(rig.reference_lrot[None], frames, axis=0)
         own_lpos = np.repeat(sk.offsets[None], frames, axis=0)
         own_lpos[:, 0] = 0.0
+    mapped, _ = _canonical_sources(rig)
+    joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
+    cgrot = _world_rotations(canon.lrot, C.PARENTS, _above_mapped(C.PARENTS, mapped))
+    target = rot.mul(cgrot[:, mapped], rig.tpose[joints])  # world rotations of mapped joints
+    if like is not None:
+        # joints in between keep the clip's motion: take out what they add to the bones
+        for c in rig.corrections:
+            i = int(np.nonzero(joints == c.joint)[0][0])
+            target[:, i] = rot.mul(target[:, i], rot.inv(_correction(c, own_lrot, own_lpos)))
     roots = parents < 0
     own_lrot[:, roots] = rot.mul(rig.up, own_lrot[:, roots])  # into the upright world
     own_lpos[:, roots] = rot.apply(rig.up, own_lpos[:, roots])
-    mapped, _ = _canonical_sources(rig)
-    joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
-    target = rot.mul(cgrot[:, mapped], rig.tpose[joints])  # world rotations of mapped joints
-    if like is not None and rig.corrections:
-        # joints in between keep the clip's motion: take out what they add to the bones
-        lgrot, lgpos = K.fk(own_lrot, own_lpos, parents)
-        for c in rig.corrections:
-            i = int(np.nonzero(joints == c.joint)[0][0])
-            target[:, i] = rot.mul(target[:, i], rot.inv(_correction(c, lgrot, lgpos)))
     # world rotations are needed only down to the mapped joints' parents
-    needed = np.zeros(sk.num_joints, dtype=bool)
-    for j in joints:
-        p = int(parents[j])
-        while p >= 0 and not needed[p]:
-            needed[p] = True
-            p = int(parents[p])
-    slot = {int(j): i for i, j in enumerate(joints)}
+    needed = _above_mapped(parents, parents[joints][parents[joints] >= 0])
+    slot = np.full(sk.num_joints, -1)
+    slot[joints] = np.arange(len(joints))
     grot = np.empty((frames, sk.num_joints, 4))
-    for j in np.nonzero(needed)[0]:
-        p = int(parents[j])
-        if j in slot:
-            grot[:, j] = target[:, slot[j]]
-        else:
-            grot[:, j] = own_lrot[:, j] if p < 0 else rot.mul(grot[:, p], own_lrot[:, j])
-    lrot = own_lrot
-    lpos = own_lpos
+    grot[:, 0] = own_lrot[:, 0] if slot[0] < 0 else target[:, slot[0]]
+    for level, above in K.levels(parents):  # a level of the hierarchy at a time
+        level, above = level[needed[level]], above[needed[level]]
+        own = slot[level] < 0
+        grot[:, level[own]] = rot.mul(grot[:, above[own]], own_lrot[:, level[own]])
+        grot[:, level[~own]] = target[:, slot[level[~own]]]
+    lrot, lpos = own_lrot, own_lpos
     inner = parents[joints] >= 0
     lrot[:, joints[~inner]] = target[:, ~inner]
     lrot[:, joints[inner]] = rot.mul(rot.inv(grot[:, parents[joints[inner]]]), target[:, inner])
     hips = rig.mapping["Hips"]
-    hips_world = cgpos[:, C.INDEX["Hips"]] * (rig.leg_length / C.leg_length())
+    hips_world = canon.lpos[:, C.INDEX["Hips"]] * (rig.leg_length / C.leg_length())
     above = _chain(parents, -1, int(parents[hips]))[::-1] if parents[hips] >= 0 else []
     if above:
         gpos = lpos[:, above[0]]

@@ -520,7 +520,7 @@ def _landing_error(
     and ``below``: what a rotation of ``top`` cannot do for its mapped children ``kids``
     through the joints in between, and what ``x`` cannot do for ``below``, as the joints
     in between hold their mean pose (mean over the frames of the worst child)."""
-    grot, gpos = frames
+    grot, gpos = frames[0][::4], frames[1][::4]  # a coarse choice: 16 of the frames will do
     err = 0.0
     for j, children in ((top, kids), (x, [below])):
         now = rot.apply(rot.inv(grot[:, j])[:, None], gpos[:, children] - gpos[:, j, None])
@@ -566,15 +566,19 @@ def hierarchy_problem(
 # --------------------------------------------------------------------------- geometry
 
 
+def sample_indices(num_frames: int, count: int = 64) -> np.ndarray:
+    """Up to ``count`` frame indices spread evenly over a clip."""
+    return np.unique(np.linspace(0, num_frames - 1, min(count, num_frames)).round()).astype(int)
+
+
 def sample_frames(
-    skeleton: Skeleton, motion: Motion | None, count: int = 48
+    skeleton: Skeleton, motion: Motion | None, count: int = 64
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """World rotations ``(N, J, 4)`` and positions ``(N, J, 3)`` of up to ``count`` frames
-    spread over the clip, or None without one."""
+    spread over the clip (:func:`sample_indices`), or None without one."""
     if motion is None or motion.num_frames == 0:
         return None
-    idx = np.unique(np.linspace(0, motion.num_frames - 1, min(count, motion.num_frames)).round())
-    idx = idx.astype(int)
+    idx = sample_indices(motion.num_frames, count)
     return K.fk(motion.lrot[idx], motion.lpos[idx], skeleton.parents)
 
 
@@ -1145,7 +1149,10 @@ def names_confidence(skeleton: Skeleton, m: dict[str, int], poses: np.ndarray) -
 
 
 def find_mapping(
-    skeleton: Skeleton, motion: Motion | None = None, explicit: dict[str, str] | None = None
+    skeleton: Skeleton,
+    motion: Motion | None = None,
+    explicit: dict[str, str] | None = None,
+    frames: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> RigMapping:
     """Canonical joint name -> index of the skeleton's joint that plays it.
 
@@ -1155,9 +1162,12 @@ def find_mapping(
     the structure decides (``motion`` adds the clip's poses to the rest pose's geometry).
     Raises ``MotionError`` (kind ``"unusable"``, ``unmapped`` listing what names could not
     find) when neither works, :class:`AmbiguousRigError` when left and right cannot be told.
+    ``frames`` (world rotations and positions of some of the clip's frames) saves computing
+    them again (:func:`sample_frames`).
     """
     given = _explicit(skeleton, explicit)
-    frames = sample_frames(skeleton, motion)
+    if frames is None:
+        frames = sample_frames(skeleton, motion)
     tree = _Tree(skeleton)
     named, convention = by_names(skeleton, frames)
     m = _complete_trunk(tree, skeleton.names, _merge(named, given), frames)
