@@ -129,6 +129,7 @@ class Result:
     fps: float
     timer: metrics.StageTimer
     warnings: list[str] = field(default_factory=list)
+    rig: dict | None = None  # the request skeleton's mapping, how found, confidence (JSON)
 
 
 def load_clip(
@@ -157,7 +158,7 @@ def finish(clip: Clip, canon: Motion, timer: metrics.StageTimer, warnings=()) ->
         out = retarget.from_canonical(canon, clip.rig, like=clip.original)
     with timer.stage("write"):
         text = bvh.dumps(out)
-    return Result(text, out.num_frames, float(out.fps), timer, list(warnings))
+    return Result(text, out.num_frames, float(out.fps), timer, list(warnings), clip.rig.report())
 
 
 def _filename(upload_name: str | None, suffix: str) -> str:
@@ -198,6 +199,8 @@ def respond(
             "timings_ms": {k: round(v, 2) for k, v in result.timer.ms.items()},
             "warnings": result.warnings,
         }
+        if result.rig is not None:
+            body["rig"] = result.rig
         return JSONResponse(body, headers=headers)
     headers["Content-Disposition"] = f'attachment; filename="{_filename(upload_name, suffix)}"'
     return Response(result.bvh, media_type=BVH_MEDIA_TYPE, headers=headers)

@@ -131,7 +131,7 @@ async def create_dance(
             out = retarget.from_canonical(canon, clip.rig).replace(fps=float(fps))
         with timer.stage("write"):
             text = bvh.dumps(out)
-        return pipeline.Result(text, out.num_frames, float(fps), timer, warnings)
+        return pipeline.Result(text, out.num_frames, float(fps), timer, warnings, clip.rig.report())
 
     result = await run_inference(request, work)
     return pipeline.respond(
