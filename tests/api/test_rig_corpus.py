@@ -133,3 +133,47 @@ def test_an_ambiguous_rig_gets_a_422_that_says_how_to_pass_a_mapping(shared_clie
     assert r.status_code == 200, r.text[:500]
     assert_same_rig(r.json()["bvh"], sent)
     assert r.json()["rig"]["mapping"]["UpperLeg_L"] == body["mapping_example"]["UpperLeg_L"]
+
+
+def shared_layouts() -> dict[str, bytes]:
+    """The start of one file per skeleton of each shared data set (names and scale)."""
+    from tests.conftest import DATA_DIR
+    from tests.unit.test_rig_mapping import head_of
+
+    out, seen = {}, set()
+    for path in sorted(DATA_DIR.rglob("*.bvh")) if DATA_DIR.exists() else []:
+        m = head_of(path, 60)
+        scale = np.log10(max(np.ptp(m.skeleton.rest_positions(), axis=0).max(), 1e-9))
+        key = (path.parent, m.skeleton.names, round(scale / 2))  # 1/128 scale apart
+        if key not in seen:
+            seen.add(key)
+            out[str(path.relative_to(DATA_DIR))] = bvh.dumps(m).encode()
+    return out
+
+
+def test_every_shared_skeleton_goes_through_every_endpoint(shared_client):
+    layouts = shared_layouts()
+    if not layouts:
+        pytest.skip("shared data not available (set MOTION_DATA_DIR)")
+    wav = encoded(song(3.0, bpm=120.0, seed=5), "WAV")
+    for name, sent in layouts.items():
+        content = {"content": ("c.bvh", sent, "text/plain")}
+        r = shared_client.post(
+            "/v1/transfer",
+            files=content,
+            data={"style_name": styles("translator")[1], "time_warp": "false"},
+        )
+        assert r.status_code == 200, (name, r.text[:300])
+        assert_same_rig(r.text, sent)
+        r = shared_client.post("/v1/stylize", files=content, data={"style_name": styles("fast")[1]})
+        assert r.status_code == 200, (name, r.text[:300])
+        assert_same_rig(r.text, sent)
+        r = shared_client.post("/v1/style-code", files={"style": ("s.bvh", sent, "text/plain")})
+        assert r.status_code == 200, (name, r.text[:300])
+        r = shared_client.post(
+            "/v1/dance",
+            files={"audio": ("a.wav", wav, "audio/wav"), "skeleton": ("r.bvh", sent, "text/plain")},
+        )
+        assert r.status_code == 200, (name, r.text[:300])
+        assert bvh.loads(r.text).skeleton.names == bvh.loads(sent).skeleton.names
+    assert len(layouts) >= 6, sorted(layouts)
