@@ -1191,7 +1191,9 @@ def find_mapping(
             unmapped=missing or None,
         ) from None
     m = _complete_trunk(tree, skeleton.names, _merge(auto, given), frames)
-    problem = hierarchy_problem(skeleton, m, tree)
+    missing = [j for j in REQUIRED if j not in m]
+    problem = f"no joint left for {', '.join(missing)}" if missing else None
+    problem = problem or hierarchy_problem(skeleton, m, tree)
     if problem is not None:
         raise MotionError(
             f"cannot map the skeleton onto the canonical humanoid: {problem} "
