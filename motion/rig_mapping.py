@@ -605,9 +605,12 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def _facing(poses: np.ndarray, legs: list[dict[str, int]], up: np.ndarray) -> np.ndarray:
+def _facing(
+    poses: np.ndarray, ends: np.ndarray, legs: list[dict[str, int]], up: np.ndarray
+) -> np.ndarray:
     """Forward vectors ``(N, 3)`` across the body's up axis, as long as the cue is strong
-    (in leg lengths): toes point forward, knees bend forward."""
+    (in leg lengths): toes point forward (the leg's last joint past the ankle, else the
+    ankle's End Site), knees bend forward."""
     fwd = np.zeros(poses.shape[:1] + (3,))
     for leg in legs:
         hip, knee, ankle = (
@@ -617,11 +620,9 @@ def _facing(poses: np.ndarray, legs: list[dict[str, int]], up: np.ndarray) -> np
         )
         length = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
         length = np.maximum(length, 1e-9)[:, None]
-        cues = []
-        if "tip" in leg:
-            cues.append(poses[:, leg["tip"]] - ankle)
-        cues.append(2.0 * (knee - 0.5 * (hip + ankle)))
-        for v in cues:
+        tip = leg.get("tip", leg["Foot"])
+        toes = poses[:, tip] if tip != leg["Foot"] else ends[:, tip]
+        for v in (toes - ankle, 2.0 * (knee - 0.5 * (hip + ankle))):
             v = v - np.sum(v * up, axis=-1, keepdims=True) * up
             fwd += v / length
     return fwd
@@ -969,11 +970,7 @@ def by_structure(
     m["Head"] = head_chain.joints[_head_joint(head_chain, tree, pruned, words)]
     # left and right
     up = _body_up(poses, best.hips, best.chest)
-    legs = [limbs[t] for t in best.legs]
-    if legs[0].get("tip") == legs[0]["Foot"] and tree.end[legs[0]["Foot"]] <= tree.tiny:
-        for leg in legs:
-            leg.pop("tip", None)
-    fwd = _facing(poses, legs, up)
+    fwd = _facing(poses, ends, [limbs[t] for t in best.legs], up)
     pairs = {"legs": list(best.legs), "arms": list(best.arms)}
     root_of = {"legs": "UpperLeg", "arms": "UpperArm"}
     decided: dict[str, float] = {}
@@ -1119,8 +1116,9 @@ def by_names(
     return _complete_trunk(tree, names, found, frames), convention or "word patterns"
 
 
-def names_confidence(skeleton: Skeleton, m: dict[str, int], poses: np.ndarray) -> float:
-    """How well a name mapping fits the rig's geometry: legs hang from the hips, and the
+def names_confidence(m: dict[str, int], poses: np.ndarray, ends: np.ndarray) -> float:
+    """How well a name mapping fits the rig's geometry (``poses`` and their End Sites
+    ``ends``, :func:`sample_poses`, :func:`sample_ends`): legs hang from the hips, and the
     joints named left sit on the body's left given its facing (1 when both hold clearly,
     lower where the geometry is silent, near 0 where it disagrees)."""
     up = _body_up(poses, m["Hips"], m["Chest"])
@@ -1134,7 +1132,7 @@ def names_confidence(skeleton: Skeleton, m: dict[str, int], poses: np.ndarray) -
         float(np.mean(np.sum(_unit(poses[:, m[f"Foot_{s}"]] - poses[:, m["Hips"]]) * up, -1)))
         for s in ("L", "R")
     )
-    fwd = _facing(poses, legs, up)
+    fwd = _facing(poses, ends, legs, up)
     vote_legs, strength = _side_votes(poses, up, fwd, m["UpperLeg_L"], m["UpperLeg_R"])
     vote_arms, _ = _side_votes(poses, up, fwd, m["UpperArm_L"], m["UpperArm_R"])
     conf = 1.0
@@ -1176,8 +1174,10 @@ def find_mapping(
     if not missing and problem is None:
         if set(given) >= set(REQUIRED):
             return RigMapping(m, "given", 1.0, "")
-        poses = sample_poses(skeleton, frames)
-        return RigMapping(m, "names", names_confidence(skeleton, m, poses), convention)
+        confidence = names_confidence(
+            m, sample_poses(skeleton, frames), sample_ends(skeleton, frames)
+        )
+        return RigMapping(m, "names", confidence, convention)
     try:
         auto, confidence = by_structure(skeleton, motion, given, frames)
     except AmbiguousRigError:
