@@ -968,37 +968,8 @@ def by_structure(
             limbs[tip] = limb
     head_chain = _chain(tree, poses, ends, best.chest, best.head)
     m["Head"] = head_chain.joints[_head_joint(head_chain, tree, pruned, words)]
-    # left and right
-    up = _body_up(poses, best.hips, best.chest)
-    fwd = _facing(poses, ends, [limbs[t] for t in best.legs], up)
-    pairs = {"legs": list(best.legs), "arms": list(best.arms)}
-    root_of = {"legs": "UpperLeg", "arms": "UpperArm"}
-    decided: dict[str, float] = {}
-    side_conf: dict[str, float] = {}
-    for pair, (t0, t1) in pairs.items():
-        vote, strength = _side_votes(
-            poses, up, fwd, limbs[t0][root_of[pair]], limbs[t1][root_of[pair]]
-        )
-        named = _given_side(given, limbs[t0], limbs[t1]) or _name_side(words, tree, limbs, t0, t1)
-        if named:
-            decided[pair] = named
-            side_conf[pair] = 1.0 if vote * named > 0.3 and strength > 0.05 else 0.75
-        elif abs(vote) >= 0.3 and strength >= 0.03:
-            decided[pair] = float(np.sign(vote))
-            side_conf[pair] = min(1.0, abs(vote) / 0.6) * min(1.0, strength / 0.15)
-    for pair, other in (("legs", "arms"), ("arms", "legs")):
-        if pair not in decided and other in decided:
-            # the other pair's sides give the body's left: this pair's follow
-            o0, o1 = pairs[other]
-            key = root_of[other]
-            lateral = poses[:, limbs[o0][key]] - poses[:, limbs[o1][key]]
-            lateral *= decided[other]
-            t0, t1 = pairs[pair]
-            d = poses[:, limbs[t0][root_of[pair]]] - poses[:, limbs[t1][root_of[pair]]]
-            vote = float(np.mean(np.sum(_unit(d) * _unit(lateral), axis=-1)))
-            if abs(vote) >= 0.3:
-                decided[pair] = float(np.sign(vote))
-                side_conf[pair] = side_conf[other] * min(1.0, abs(vote) / 0.6)
+    pairs = {"legs": tuple(best.legs), "arms": tuple(best.arms)}
+    decided, side_conf = _sides(poses, ends, best, limbs, pairs, given, words, tree)
     if len(decided) < 2:
         raise _ambiguous(skeleton, tree, pairs, limbs, [p for p in pairs if p not in decided])
     for pair, (t0, t1) in pairs.items():
@@ -1011,6 +982,50 @@ def by_structure(
     conf_limbs = 1.0 - np.exp(-max(min(limb_margins), 0.0) / 0.3)
     confidence = float(min(conf_roles, conf_limbs, *side_conf.values()))
     return m, round(max(0.0, min(1.0, confidence)), 3)
+
+
+def _sides(
+    poses: np.ndarray,
+    ends: np.ndarray,
+    best: _Reading,
+    limbs: dict[int, dict[str, int]],
+    pairs: dict[str, tuple[int, int]],
+    given: dict[str, int],
+    words,
+    tree: _Tree,
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Per pair of limbs (keyed "legs", "arms"), +1 if its first chain is the left one,
+    -1 if the second, and how sure: the caller's mapping, else the facing (toes, knees)
+    with names where the geometry is silent; a pair nothing decides follows the other's
+    left. Pairs left undecided are missing from the result."""
+    up = _body_up(poses, best.hips, best.chest)
+    fwd = _facing(poses, ends, [limbs[t] for t in best.legs], up)
+    root_of = {"legs": "UpperLeg", "arms": "UpperArm"}
+    decided: dict[str, float] = {}
+    conf: dict[str, float] = {}
+    for pair, (t0, t1) in pairs.items():
+        vote, strength = _side_votes(
+            poses, up, fwd, limbs[t0][root_of[pair]], limbs[t1][root_of[pair]]
+        )
+        named = _given_side(given, limbs[t0], limbs[t1]) or _name_side(words, tree, limbs, t0, t1)
+        if named:
+            decided[pair] = named
+            conf[pair] = 1.0 if vote * named > 0.3 and strength > 0.05 else 0.75
+        elif abs(vote) >= 0.3 and strength >= 0.03:
+            decided[pair] = float(np.sign(vote))
+            conf[pair] = min(1.0, abs(vote) / 0.6) * min(1.0, strength / 0.15)
+    for pair, other in (("legs", "arms"), ("arms", "legs")):
+        if pair not in decided and other in decided:
+            o0, o1 = pairs[other]
+            key = root_of[other]
+            lateral = (poses[:, limbs[o0][key]] - poses[:, limbs[o1][key]]) * decided[other]
+            t0, t1 = pairs[pair]
+            d = poses[:, limbs[t0][root_of[pair]]] - poses[:, limbs[t1][root_of[pair]]]
+            vote = float(np.mean(np.sum(_unit(d) * _unit(lateral), axis=-1)))
+            if abs(vote) >= 0.3:
+                decided[pair] = float(np.sign(vote))
+                conf[pair] = conf[other] * min(1.0, abs(vote) / 0.6)
+    return decided, conf
 
 
 def _given_side(given: dict[str, int], limb0: dict[str, int], limb1: dict[str, int]) -> float:
