@@ -108,16 +108,18 @@ eval-translator: $(VENV)/.dev
 	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest --classifier-cache runs/eval/classifiers
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
-# BVH parse/write, retargeting and BVH reading against bvhio 1.5.4 on the same real files,
-# the fast networks in onnxruntime vs torch eager, the translator pipeline, dance generation
-# for a 3-minute song, the translator and dance networks in onnxruntime vs torch eager,
-# end-to-end HTTP latency (240/960/3,840 frames, end to end over the networks' own
-# Server-Timing, cost vs length, throughput at 1-8 clients), 48 clients sending a 3,840-frame
-# transfer at once (200 or 503 with Retry-After, peak RSS) and the loopback load test. Not
-# part of `make test`.
+# BVH parse/write, BVH reading against bvhio 1.5.4 on the same real files, retargeting (with
+# every shared BVH's round trip, and beside motion/ as it was at BENCH_AGAINST), the fast
+# networks in onnxruntime vs torch eager, the translator pipeline, dance generation for a
+# 3-minute song, the translator and dance networks in onnxruntime vs torch eager, end-to-end
+# HTTP latency (240/960/3,840 frames, end to end over the networks' own Server-Timing, cost
+# vs length, throughput at 1-8 clients), 48 clients sending a 3,840-frame transfer at once
+# (200 or 503 with Retry-After, peak RSS) and the loopback load test. Not part of `make test`.
+BENCH_AGAINST ?= 836ff33
 .PHONY: bench
 bench: $(VENV)/.dev
 	$(PY) -m bench.bench_motion
+	$(PY) -m bench.bench_retarget --against $(BENCH_AGAINST)
 	$(PY) -m bench.bench_fast
 	$(PY) -m bench.bench_translator
 	$(PY) -m bench.bench_dance

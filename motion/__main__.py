@@ -1,6 +1,7 @@
 """Command line for pipelines.
 
     python -m motion info FILE.bvh                      JSON: joints, frames, fps, mapping
+                                                        (how it was found, a confidence)
     python -m motion canonical IN.bvh -o OUT.bvh        onto the canonical skeleton, 30 fps
     python -m motion retarget IN.bvh --onto T.bvh -o OUT.bvh
 
@@ -46,10 +47,15 @@ def cmd_info(args: argparse.Namespace) -> dict:
         rig = retarget.make_rig(sk, m, _mapping_arg(args.mapping))
     except MotionError as e:
         out.update(mappable=False, error=str(e), missing=e.unmapped or [])
+        out.update({k: v for k, v in e.details().items() if k not in ("unmapped", "line")})
         return out
+    report = rig.report()
     out.update(
         mappable=True,
-        mapping=rig.mapping_by_name(),
+        mapping=report["mapping"],
+        method=report["method"],
+        convention=report.get("convention", ""),
+        confidence=report["confidence"],
         missing=[j for j in C.JOINTS[1:] if j not in rig.mapping],
         unmapped=rig.unmapped,
         reference_pose=rig.reference,

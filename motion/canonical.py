@@ -103,6 +103,13 @@ def leg_length() -> float:
     )
 
 
+def body_height() -> float:
+    """Standing height of the canonical T-pose: floor to the top of the head (End Site)."""
+    rest = SKELETON.rest_positions()
+    top = rest[INDEX["Head"], 1] + _END_SITES[INDEX["Head"]][0][1]
+    return float(top - rest[:, 1].min())
+
+
 def template_directions() -> dict[str, np.ndarray]:
     """Unit direction of each joint's main bone in the canonical T-pose."""
     out = {}

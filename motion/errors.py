@@ -41,3 +41,27 @@ class MotionError(ValueError):
         if self.limit is not None:
             out["limit"] = self.limit
         return out
+
+
+class AmbiguousRigError(MotionError):
+    """A humanoid skeleton whose mapping cannot be decided: two chains alike and nothing
+    (geometry, names) telling which is which. Always ``kind="unusable"`` (HTTP 422).
+
+    ``chains``: per undecided pair, ``{"limbs": "legs", "chains": [[names...], [names...]]}``;
+    ``example_mapping``: a ``mapping`` that would settle it (canonical joint -> joint name).
+    """
+
+    def __init__(self, message: str, *, chains: list[dict], example_mapping: dict[str, str]):
+        super().__init__(message, kind="unusable")
+        self.chains = chains
+        self.example_mapping = example_mapping
+
+    def details(self) -> dict:
+        out = super().details()
+        out["ambiguous"] = self.chains
+        out["mapping_example"] = dict(self.example_mapping)
+        out["mapping_help"] = (
+            "send a 'mapping' form field (JSON object, canonical joint -> your joint name, "
+            "either way round) naming the left side of each pair"
+        )
+        return out

@@ -16,11 +16,26 @@ UP = np.array([0.0, 1.0, 0.0])
 FORWARD = np.array([0.0, 0.0, 1.0])
 
 
+def levels(parents: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The joints below the root grouped by depth, top first: ``(joints, their parents)``
+    per level. Every joint of a level can be posed at once once the level above is."""
+    parents = np.asarray(parents)
+    depth = np.zeros(len(parents), dtype=int)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
+    out = []
+    for d in range(1, int(depth.max(initial=0)) + 1):
+        joints = np.nonzero(depth == d)[0]
+        out.append((joints, parents[joints]))
+    return out
+
+
 def fk(lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Global rotations ``(..., J, 4)`` and positions ``(..., J, 3)`` from local ones.
 
     ``lrot (..., J, 4)``, ``lpos (..., J, 3)``: a joint's rotation and its translation
     from its parent (the root's is its world position); ``parents (J,)`` parents first.
+    Loops over the hierarchy's levels (all joints of one depth at once), never frames.
     """
     lrot = np.asarray(lrot, dtype=np.float64)
     lpos = np.asarray(lpos, dtype=np.float64)
@@ -31,10 +46,10 @@ def fk(lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray) -> tuple[np.ndar
     gpos = np.empty(shape + (3,))
     grot[..., 0, :] = lrot[..., 0, :]
     gpos[..., 0, :] = lpos[..., 0, :]
-    for j in range(1, len(parents)):
-        p = parents[j]
-        gpos[..., j, :] = rot.apply(grot[..., p, :], lpos[..., j, :]) + gpos[..., p, :]
-        grot[..., j, :] = rot.mul(grot[..., p, :], lrot[..., j, :])
+    for joints, above in levels(parents):
+        prot = grot[..., above, :]
+        gpos[..., joints, :] = rot.apply(prot, lpos[..., joints, :]) + gpos[..., above, :]
+        grot[..., joints, :] = rot.mul(prot, lrot[..., joints, :])
     return grot, gpos
 
 

@@ -10,254 +10,40 @@ direction). Motion then travels as world rotations relative to that T-pose:
     target global    = canonical global * target tpose
 
 The reference pose is the rest pose when it looks like a standing humanoid,
-a registered pose for known rigs whose rest pose does not (Bandai lies flat
-along X), or else the clip's most upright frame.
+Bandai's standing pose for its rig (its rest lies along X), or else the clip's
+most upright frame.
 
-Joints are mapped by name (Bandai, CMU 31, DAZ/Poser 43, cgspeed 3ds Max,
-Mixamo ``mixamorig:``, 3ds Max Biped ``Bip01``, Unreal ``thigh_l``, generic
-``LeftUpLeg``/``Spine1``) plus the hierarchy: limbs by name, then hips, chest
-and neck as the common ancestors of the limbs. A caller may pass an explicit
-mapping. Unmapped joints keep their own motion on the way back.
+Joints between mapped joints (spine segments, a pelvis or waist bone, twist and
+helper bones) make a mapped joint's bone point elsewhere than the joint's own
+rotation says. So each such mapped joint carries a *correction*: the rotation
+that takes its mapped children, as the reference pose places them in the joint's
+frame, to where the joints in between place them now (the shortest swing for one
+child, the best fit for several). On the way in the canonical rotation includes
+it; on the way back it is taken out again, measured on the joints in between as
+the clip to fit (``like``) poses them, or nothing when they hold the reference
+pose, so the mapped joints land where the source puts them.
+
+Which joint is which comes from :mod:`motion.rig_mapping` (names, else structure;
+an explicit mapping overrides). Unmapped joints keep their own motion on the way
+back. Everything runs on whole clips at once: loops go over joints, never frames.
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from motion import canonical as C
 from motion import kinematics as K
+from motion import rig_mapping
 from motion import rotations as rot
-from motion.errors import MotionError
+from motion.rig_mapping import REQUIRED
 from motion.skeleton import Motion, Skeleton
 
-REQUIRED = (
-    "Hips", "Chest", "Head",
-    "UpperArm_L", "LowerArm_L", "Hand_L", "UpperArm_R", "LowerArm_R", "Hand_R",
-    "UpperLeg_L", "LowerLeg_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R",
-)  # fmt: skip
-
-# Limb joints by name. Names are normalised first: lower case, namespaces
-# ("mixamorig:") and rig prefixes ("Bip01 ", "DEF-") removed, side words turned
-# into a marker; patterns then match the side-free rest.
-_LIMB_PATTERNS: dict[str, tuple[str, ...]] = {
-    "UpperLeg": ("upleg", "upperleg", "thigh", "hip", "femur", "legupper"),
-    "LowerLeg": ("leg", "lowerleg", "knee", "shin", "calf", "tibia", "leglower"),
-    "Foot": ("foot", "ankle"),
-    "Toes": ("toebase", "toe", "toes", "ball", "toe0", "toes0"),
-    "Shoulder": ("shoulder", "clavicle", "collar", "clav"),
-    "UpperArm": ("arm", "upperarm", "shldr", "shoulder", "humerus", "armupper"),
-    "LowerArm": ("forearm", "lowerarm", "elbow", "armlower", "radius"),
-    "Hand": ("hand", "wrist"),
-}
-_SKIP_WORDS = ("twist", "roll", "end", "nub", "site", "ik", "pole", "target", "helper", "jnt")
-
-
-def normalise_name(name: str) -> tuple[str, str]:
-    """``(side, core)`` of a joint name: side ``"L"``, ``"R"`` or ``""``; core lower case."""
-    n = name.strip()
-    n = n.split(":")[-1]  # namespaces, mixamorig:
-    n = re.sub(r"^(bip0*\d+|def|mixamorig\d*|character\d*|cc_base|rig)[\s_\-.]+", "", n, flags=re.I)
-    n = re.sub(r"(?<=[a-z])(?=[A-Z])", "_", n)  # camelCase -> camel_Case
-    low = n.lower()
-    tokens = [t for t in re.split(r"[\s_\-.]+", low) if t]
-    side = ""
-    rest: list[str] = []
-    for t in tokens:
-        if t in ("l", "left", "lft") and not side:
-            side = "L"
-        elif t in ("r", "right", "rgt", "rt") and not side:
-            side = "R"
-        else:
-            rest.append(t)
-    core = "".join(rest)
-    if not side:
-        m = re.match(r"^(left|right)(.+)$", core) or re.match(r"^([lr])([a-z].+)$", core)
-        if m:
-            side = "L" if m.group(1) in ("left", "l") else "R"
-            core = m.group(2)
-    return side, core
-
-
-def _is_helper(core: str) -> bool:
-    return any(w in core for w in _SKIP_WORDS)
-
-
-def _match(core: str, pattern: str) -> bool:
-    # "leg" must not match "upleg"; allow trailing digits (toe0, neck01)
-    return re.fullmatch(pattern + r"\d*", core) is not None
-
-
-def find_mapping(skeleton: Skeleton, explicit: dict[str, str] | None = None) -> dict[str, int]:
-    """Canonical joint name -> index of the skeleton's joint that plays it.
-
-    ``explicit`` maps joint names either way (``{"mixamorig:Hips": "Hips"}`` or
-    ``{"Hips": "mixamorig:Hips"}``); its entries override the automatic ones.
-    Raises ``MotionError`` (kind ``"unusable"``) listing the canonical joints it
-    could not find.
-    """
-    names = skeleton.names
-    parents = skeleton.parents
-    found: dict[str, int] = {}
-    if explicit:
-        for a, b in explicit.items():
-            if a in C.INDEX and b in names:
-                found[a] = names.index(b)
-            elif b in C.INDEX and a in names:
-                found[b] = names.index(a)
-            else:
-                raise MotionError(
-                    f"mapping entry {a!r}: {b!r} names no canonical joint and joint of this file",
-                    kind="unusable",
-                )
-    if list(names) == list(C.JOINTS):
-        auto = {n: i for i, n in enumerate(names)}
-    else:
-        auto = _auto_mapping(skeleton)
-    for k, v in auto.items():
-        if k not in found and v not in found.values():
-            found[k] = v
-    missing = [j for j in REQUIRED if j not in found]
-    if missing:
-        raise MotionError(
-            "cannot map the skeleton onto the canonical humanoid: no joint found for "
-            + ", ".join(missing)
-            + " (pass a 'mapping' of joint names)",
-            kind="unusable",
-            unmapped=missing,
-        )
-    # every mapped joint must sit below the mapped hips
-    hips = found["Hips"]
-    for k, v in found.items():
-        if k != "joint_Root" and not _is_ancestor(parents, hips, v):
-            raise MotionError(
-                f"mapped joint {names[v]!r} ({k}) is not below the hips", kind="unusable"
-            )
-    return found
-
-
-def _ancestors(parents: np.ndarray, j: int) -> list[int]:
-    out = []
-    while j >= 0:
-        out.append(j)
-        j = int(parents[j])
-    return out
-
-
-def _is_ancestor(parents: np.ndarray, a: int, b: int) -> bool:
-    return a in _ancestors(parents, b)
-
-
-def _auto_mapping(skeleton: Skeleton) -> dict[str, int]:
-    names = skeleton.names
-    parents = skeleton.parents
-    info = [normalise_name(n) for n in names]
-    out: dict[str, int] = {}
-
-    def candidates(kind: str, side: str) -> list[int]:
-        pats = _LIMB_PATTERNS[kind]
-        hits = []
-        for rank, pat in enumerate(pats):
-            for j, (s, core) in enumerate(info):
-                if s == side and not _is_helper(core) and _match(core, pat):
-                    hits.append((rank, j))
-        return [j for _, j in sorted(hits)]
-
-    def descendants_first(root: int, pool: list[int]) -> int | None:
-        best = None
-        for j in pool:
-            if j != root and _is_ancestor(parents, root, j):
-                depth = len(_ancestors(parents, j))
-                if best is None or depth < best[0]:
-                    best = (depth, j)
-        return None if best is None else best[1]
-
-    def chain_anchor(middle: str, top: str, side: str) -> tuple[int | None, int | None]:
-        """The knee (elbow) and its thigh (upper arm): the middle joint anchors a limb."""
-        middles, tops = candidates(middle, side), candidates(top, side)
-        mid = next(
-            (k for k in middles if any(t != k and _is_ancestor(parents, t, k) for t in tops)),
-            middles[0] if middles else None,
-        )
-        if mid is None:
-            return None, None
-        upper = _nearest_ancestor_in(parents, mid, tops)
-        return (upper if upper is not None else _non_helper_parent(parents, info, mid)), mid
-
-    for side in ("L", "R"):
-        thigh, knee = chain_anchor("LowerLeg", "UpperLeg", side)
-        if knee is not None:
-            out[f"LowerLeg_{side}"] = knee
-            if thigh is not None:
-                out[f"UpperLeg_{side}"] = thigh
-            foot = descendants_first(knee, candidates("Foot", side))
-            if foot is not None:
-                out[f"Foot_{side}"] = foot
-                toe = descendants_first(foot, candidates("Toes", side))
-                if toe is not None:
-                    out[f"Toes_{side}"] = toe
-        upper, elbow = chain_anchor("LowerArm", "UpperArm", side)
-        if elbow is not None:
-            out[f"LowerArm_{side}"] = elbow
-            if upper is not None:
-                out[f"UpperArm_{side}"] = upper
-                clavicles = [c for c in candidates("Shoulder", side) if c != upper]
-                clav = _nearest_ancestor_in(parents, upper, clavicles)
-                if clav is not None:
-                    out[f"Shoulder_{side}"] = clav
-            hand = descendants_first(elbow, candidates("Hand", side))
-            if hand is not None:
-                out[f"Hand_{side}"] = hand
-    # trunk from the hierarchy: hips = common ancestor of the thighs, chest = of the arms
-    if "UpperLeg_L" in out and "UpperLeg_R" in out:
-        hips = _common_ancestor(parents, out["UpperLeg_L"], out["UpperLeg_R"])
-        out["Hips"] = hips
-    arm_l = out.get("Shoulder_L", out.get("UpperArm_L"))
-    arm_r = out.get("Shoulder_R", out.get("UpperArm_R"))
-    heads = [j for j, (s, core) in enumerate(info) if not s and re.fullmatch(r"head\d*", core)]
-    if arm_l is not None and arm_r is not None:
-        chest = _common_ancestor(parents, arm_l, arm_r)
-        if "neck" in info[chest][1] and parents[chest] >= 0:  # Biped hangs clavicles off the neck
-            out["Neck"] = chest
-            chest = int(parents[chest])
-        out["Chest"] = chest
-        heads = [h for h in heads if _is_ancestor(parents, chest, h) and h != chest]
-        if heads:
-            head = min(heads, key=lambda h: len(_ancestors(parents, h)))
-            out["Head"] = head
-            if "Neck" not in out and parents[head] != chest:
-                out["Neck"] = int(parents[head])
-        hips = out.get("Hips")
-        if hips is not None and _is_ancestor(parents, hips, chest) and parents[chest] != hips:
-            out["Spine"] = int(parents[chest])
-    return out
-
-
-def _nearest_ancestor_in(parents: np.ndarray, j: int, pool: list[int]) -> int | None:
-    for a in _ancestors(parents, int(parents[j])) if parents[j] >= 0 else []:
-        if a in pool:
-            return a
-    return None
-
-
-def _non_helper_parent(parents: np.ndarray, info: list[tuple[str, str]], j: int) -> int | None:
-    p = int(parents[j])
-    while p >= 0 and _is_helper(info[p][1]):
-        p = int(parents[p])
-    return p if p >= 0 else None
-
-
-def _common_ancestor(parents: np.ndarray, a: int, b: int) -> int:
-    anc = set(_ancestors(parents, a))
-    for j in _ancestors(parents, b):
-        if j in anc and j not in (a, b):
-            return j
-    return 0
-
-
-# --------------------------------------------------------------------------- reference pose
+__all__ = [
+    "REQUIRED", "Rig", "body_frame", "from_canonical", "make_rig", "retarget", "to_canonical",
+]  # fmt: skip
 
 _CANONICAL_REST = C.SKELETON.rest_positions()
 
@@ -296,11 +82,60 @@ def _pose_score(gpos: np.ndarray, m: dict[str, int]) -> np.ndarray:
     return score
 
 
-def _rest_is_usable(skeleton: Skeleton, m: dict[str, int]) -> bool:
-    rest = skeleton.rest_positions()
+def _rest_is_usable(rest: np.ndarray, m: dict[str, int]) -> bool:
+    """Whether rest positions ``(J, 3)`` stand like a humanoid (legs straight down)."""
     if np.linalg.norm(rest[m["Chest"]] - rest[m["Hips"]]) < 1e-6:
         return False
     return bool(_pose_score(rest, m) > 3.5)  # 4 for straight legs; arms add up to 1
+
+
+@dataclass(frozen=True)
+class _Correction:
+    """A mapped joint whose mapped children hang from it through joints in between."""
+
+    joint: int  # the mapped joint
+    paths: tuple[tuple[int, ...], ...]  # per mapped child: the joints from it up to below joint
+    reference: np.ndarray  # (n, 3) where the reference pose puts them, in the joint's frame
+    weights: np.ndarray  # (n,)
+
+
+def _fit_rotation(reference: np.ndarray, now: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rotations ``(F, 4)`` taking the vectors ``reference (n, 3)`` onto ``now (F, n, 3)``:
+    the shortest swing for one vector, the weighted least-squares fit (Kabsch) for more."""
+    if len(reference) == 1:
+        return rot.between(reference[0], now[:, 0])
+    cov = np.einsum("n,fni,nj->fij", weights, now, reference)
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(u @ vt))
+    u[..., :, 2] *= d[..., None]
+    return rot.from_matrix(u @ vt)
+
+
+def _correction(c: _Correction, lrot: np.ndarray, lpos: np.ndarray) -> np.ndarray:
+    """The correction's rotation ``(F, 4)`` for a clip's local rotations and translations:
+    only the joints in between matter, and where they do not move it is computed once."""
+    now = []
+    for path in c.paths:  # child first: its place in the frame of the joint at the top
+        v = lpos[:, path[0]]
+        for k in path[1:]:
+            v = rot.apply(lrot[:, k], v) + lpos[:, k]
+        now.append(v)
+    now = np.stack(now, axis=1)
+    if not (now != now[:1]).any():
+        return np.broadcast_to(_fit_rotation(c.reference, now[:1], c.weights), (len(now), 4))
+    return _fit_rotation(c.reference, now, c.weights)
+
+
+def _world_rotations(lrot: np.ndarray, parents: np.ndarray, needed: np.ndarray) -> np.ndarray:
+    """World rotations ``(F, J, 4)`` of the ``needed`` joints (whose parents are needed
+    too), a level of the hierarchy at a time; the others are left unset."""
+    grot = np.empty(lrot.shape)
+    grot[:, 0] = lrot[:, 0]
+    for joints, above in K.levels(parents):
+        keep = needed[joints]
+        if keep.any():
+            grot[:, joints[keep]] = rot.mul(grot[:, above[keep]], lrot[:, joints[keep]])
+    return grot
 
 
 @dataclass(frozen=True)
@@ -314,6 +149,10 @@ class Rig:
     leg_length: float  # hip-to-ankle along the bones
     reference: str  # "rest", "registered" or "frame <i>"
     up: np.ndarray = field(default_factory=lambda: rot.IDENTITY.copy())  # file's world -> Y-up
+    method: str = "names"  # how the mapping was found: "names", "structure" or "given"
+    confidence: float = 1.0
+    convention: str = ""  # the naming convention the names matched
+    corrections: tuple[_Correction, ...] = ()
 
     @property
     def up_axis(self) -> str:
@@ -328,8 +167,24 @@ class Rig:
         used = set(self.mapping.values())
         return [n for i, n in enumerate(self.skeleton.names) if i not in used]
 
+    @property
+    def height(self) -> float:
+        """Standing height in the file's units: the canonical one scaled by leg length."""
+        return C.body_height() * self.leg_length / C.leg_length()
+
     def mapping_by_name(self) -> dict[str, str]:
         return {k: self.skeleton.names[v] for k, v in self.mapping.items()}
+
+    def report(self) -> dict:
+        """The mapping, how it was found and how sure it is, for JSON answers."""
+        out = {
+            "mapping": self.mapping_by_name(),
+            "method": self.method,
+            "confidence": self.confidence,
+        }
+        if self.convention:
+            out["convention"] = self.convention
+        return out
 
 
 def make_rig(
@@ -341,90 +196,182 @@ def make_rig(
     """Map ``skeleton`` and compute its T-pose rotations.
 
     The reference pose is ``reference_lrot`` if given, else the rest pose when it is
-    a usable standing pose, else a registered pose for a known rig, else the most
-    upright frame of ``motion``.
+    a usable standing pose, else Bandai's standing pose for its rig, else the most
+    upright of the clip's frames (64 spread over ``motion``).
     """
-    m = find_mapping(skeleton, mapping)
+    frames, sampled = None, np.zeros(0, dtype=int)
+    if motion is not None and motion.num_frames:
+        sampled = rig_mapping.sample_indices(motion.num_frames)
+        frames = K.fk(motion.lrot[sampled], motion.lpos[sampled], skeleton.parents)
+    found = rig_mapping.find_mapping(skeleton, motion, mapping, frames=frames)
+    m = found.joints
     nj = skeleton.num_joints
+    rest = skeleton.rest_positions()
+    height = float(max(np.ptp(rest, axis=0).max(), 1e-6))
     how = "given"
     if reference_lrot is None:
-        if _rest_is_usable(skeleton, m):
+        if _rest_is_usable(rest, m):
             reference_lrot, how = rot.identity((nj,)), "rest"
-        elif (reg := _registered_reference(skeleton)) is not None:
-            reference_lrot, how = reg, "registered"
-        elif motion is not None:
-            step = max(1, motion.num_frames // 200)
-            sub = motion.lrot[::step]
-            gpos = K.fk(sub, skeleton.offsets[None], skeleton.parents)[1]
-            best = int(np.argmax(_pose_score(gpos, m)))
-            reference_lrot, how = sub[best].copy(), f"frame {best * step}"
+        elif skeleton.names == C.JOINTS:  # Bandai's own rig: its rest pose lies along X
+            reference_lrot, how = C.BANDAI_REFERENCE_LROT, "registered"
+        elif frames is not None:
+            best = int(np.argmax(_pose_score(frames[1], m)))
+            reference_lrot, how = motion.lrot[sampled[best]].copy(), f"frame {sampled[best]}"
         else:
             reference_lrot, how = rot.identity((nj,)), "rest"
     reference_lrot = rot.normalize(reference_lrot)
+    if frames is not None and (how == "rest" or how.startswith("frame")):
+        # joints between mapped ones hold their usual pose: some rigs keep a pelvis or
+        # neck bone turned throughout, and a clip retargeted without its own clip to
+        # follow (``from_canonical`` without ``like``) must land mapped joints there too
+        between = _joints_between(skeleton, m)
+        if len(between):
+            reference_lrot = reference_lrot.copy()
+            reference_lrot[between] = rot.mean(motion.lrot[sampled][:, between])
     grot, gpos = K.fk(reference_lrot, skeleton.offsets, skeleton.parents)
+    tpose = _tpose(skeleton, m, grot, gpos, height)
+    leg = 0.0
+    for s in ("L", "R"):
+        path = _chain(skeleton.parents, m[f"UpperLeg_{s}"], m[f"Foot_{s}"])
+        leg += sum(np.linalg.norm(skeleton.offsets[k]) for k in path) / 2.0
+    return Rig(
+        skeleton,
+        m,
+        tpose,
+        reference_lrot,
+        max(float(leg), 1e-9),
+        how,
+        _upright(rest, m, frames),
+        found.method,
+        found.confidence,
+        found.convention,
+        _corrections(skeleton, m, grot, gpos, height),
+    )
+
+
+def _tpose(
+    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray, height: float
+) -> np.ndarray:
+    """Per joint ``(J, 4)``, the world rotation from the reference pose (``grot``, ``gpos``)
+    into the canonical T-pose: into the body's axes, then a swing of the joint's bone (to
+    its mapped child, else to its fingers or toe tip) onto the template direction; joints
+    with neither swing with their parent."""
     frame = body_frame(gpos, m)
     to_body = rot.from_matrix(frame.T)  # world -> canonical axes
     templates = C.template_directions()
-    tpose = rot.identity((nj,))
-    swings: dict[str, np.ndarray] = {}
+    names, bones, targets = [], [], []
     for cname in C.JOINTS:
         if cname not in m:
             continue
         j = m[cname]
-        swing = None
         child = C.MAIN_CHILD.get(cname)
         while child is not None and child not in m:  # skip unmapped canonical joints
             child = C.MAIN_CHILD.get(child)
         if child is not None and cname in templates:
             bone = gpos[m[child]] - gpos[j]
-            if np.linalg.norm(bone) > 1e-6 * max(skeleton.height(), 1e-6):
-                swing = rot.between(
-                    frame.T @ bone,
-                    _CANONICAL_REST[C.INDEX[child]] - _CANONICAL_REST[C.INDEX[cname]],
-                )
-        if swing is None and cname in _TIP_TEMPLATES:  # hand, or foot without toes
-            tip = _tip_vector(skeleton, j, grot, gpos)
+            if np.linalg.norm(bone) > 1e-6 * height:
+                names.append(cname)
+                bones.append(frame.T @ bone)
+                targets.append(_CANONICAL_REST[C.INDEX[child]] - _CANONICAL_REST[C.INDEX[cname]])
+                continue
+        if cname in _TIP_TEMPLATES:  # hand, or foot without toes
+            tip = _tip_vector(skeleton, j, grot, gpos, height)
             if tip is not None:
-                swing = rot.between(frame.T @ tip, _TIP_TEMPLATES[cname])
-        if swing is None:  # leaf or degenerate bone: move rigidly with the parent's swing
+                names.append(cname)
+                bones.append(frame.T @ tip)
+                targets.append(_TIP_TEMPLATES[cname])
+    swings = dict(zip(names, rot.between(np.array(bones), np.array(targets)), strict=True))
+    tpose = rot.identity((skeleton.num_joints,))
+    for cname in C.JOINTS:  # parents first
+        if cname not in m:
+            continue
+        if cname not in swings:  # leaf or degenerate bone: move rigidly with the parent's swing
             parent = C.PARENTS[C.INDEX[cname]]
-            swing = swings.get(C.JOINTS[parent], rot.IDENTITY) if parent >= 0 else rot.IDENTITY
-        swings[cname] = swing
-        tpose[j] = rot.mul(swing, rot.mul(to_body, grot[j]))
-    leg = 0.0
-    for s in ("L", "R"):
-        path = _chain(skeleton.parents, m[f"UpperLeg_{s}"], m[f"Foot_{s}"])
-        leg += sum(np.linalg.norm(skeleton.offsets[k]) for k in path) / 2.0
-    up = _upright(skeleton, m, motion)
-    return Rig(skeleton, m, tpose, reference_lrot, max(float(leg), 1e-9), how, up)
+            swings[cname] = (
+                swings.get(C.JOINTS[parent], rot.IDENTITY) if parent >= 0 else rot.IDENTITY
+            )
+        tpose[m[cname]] = rot.mul(swings[cname], rot.mul(to_body, grot[m[cname]]))
+    return tpose
 
 
-def _upright(skeleton: Skeleton, m: dict[str, int], motion: Motion | None) -> np.ndarray:
-    """Rotation taking the file's world to Y-up: identity unless the rest pose stands along
-    another axis (Z-up exports of 3ds Max and Blender) and the motion stands along it too.
-    Both must agree: Bandai's rest pose lies along X in a Y-up world, and a Y-up clip of
-    someone lying down stands along no axis in its rest pose's direction."""
-    rest = skeleton.rest_positions()
+def _joints_between(skeleton: Skeleton, m: dict[str, int]) -> np.ndarray:
+    """Unmapped joints on the paths from the hips to mapped joints."""
+    hips = m["Hips"]
+    used = set(m.values())
+    out = set()
+    for j in used:
+        for k in _chain(skeleton.parents, hips, j)[1:]:
+            if k not in used:
+                out.add(k)
+    return np.array(sorted(out), dtype=int)
+
+
+def _mapped_children(cname: str, m: dict[str, int]) -> list[str]:
+    """The canonical children of ``cname`` that are mapped, looking through unmapped ones."""
+    out = []
+    for ci in np.nonzero(C.PARENTS == C.INDEX[cname])[0]:
+        child = C.JOINTS[ci]
+        out += [child] if child in m else _mapped_children(child, m)
+    return out
+
+
+def _corrections(
+    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray, height: float
+) -> tuple[_Correction, ...]:
+    """A correction for each mapped joint with a mapped child below joints that can move."""
+    movable = np.array([len(ch) > 0 for ch in skeleton.channels])
+    tiny = 1e-6 * height
+    out = []
+    for cname, j in m.items():
+        if cname == "joint_Root":
+            continue
+        children = [m[c] for c in _mapped_children(cname, m)]
+        paths = [tuple(_chain(skeleton.parents, j, k)) for k in children]  # child first
+        if not any(movable[list(p[1:])].any() for p in paths if len(p) > 1):
+            continue
+        ref = rot.apply(rot.inv(grot[j]), gpos[children] - gpos[j])
+        lengths = np.linalg.norm(ref, axis=-1)
+        keep = lengths > tiny
+        if keep.any():
+            kept = tuple(p for p, k in zip(paths, keep, strict=True) if k)
+            out.append(_Correction(j, kept, ref[keep], lengths[keep]))
+    return tuple(out)
+
+
+def _upright(
+    rest: np.ndarray, m: dict[str, int], frames: tuple[np.ndarray, np.ndarray] | None
+) -> np.ndarray:
+    """Rotation taking the file's world to Y-up: identity unless the body stands along
+    another axis (Z-up exports of 3ds Max and Blender). A rest pose that stands must
+    stand along it and the clip's ``frames`` (world rotations, positions) too: Bandai's
+    rest lies along X in a Y-up world, and a Y-up clip of someone lying down stands along
+    no axis in its rest pose's direction. A rest pose that does not stand (rotated joint
+    frames) leaves it to the clip."""
     spine = rest[m["Chest"]] - rest[m["Hips"]]
     length = np.linalg.norm(spine)
-    if length < 1e-9:
-        return rot.IDENTITY.copy()
-    spine = spine / length
-    i = int(np.argmax(np.abs(spine)))
-    if i == 1 or abs(spine[i]) < 0.9:
-        return rot.IDENTITY.copy()
+    standing_rest = length > 1e-9 and _rest_is_usable(rest, m)
     axis = np.zeros(3)
-    axis[i] = np.sign(spine[i])
-    if motion is None:
-        if not _rest_is_usable(skeleton, m):
+    if standing_rest:
+        spine = spine / length
+        i = int(np.argmax(np.abs(spine)))
+        if i == 1 or abs(spine[i]) < 0.9:
             return rot.IDENTITY.copy()
-    else:
-        step = max(1, motion.num_frames // 200)
-        gpos = K.fk(motion.lrot[::step], motion.lpos[::step], skeleton.parents)[1]
-        ups = gpos[:, m["Chest"]] - gpos[:, m["Hips"]]
-        ups /= np.maximum(np.linalg.norm(ups, axis=-1, keepdims=True), 1e-9)
-        if float(np.mean(ups @ axis)) < 0.7:
+        axis[i] = np.sign(spine[i])
+        if frames is None:
+            return rot.between(axis, np.array([0.0, 1.0, 0.0]))
+    elif frames is None:
+        return rot.IDENTITY.copy()
+    gpos = frames[1]
+    ups = gpos[:, m["Chest"]] - gpos[:, m["Hips"]]
+    ups /= np.maximum(np.linalg.norm(ups, axis=-1, keepdims=True), 1e-9)
+    if not standing_rest:
+        mean = ups.mean(axis=0)
+        i = int(np.argmax(np.abs(mean)))
+        if i == 1:
             return rot.IDENTITY.copy()
+        axis[i] = np.sign(mean[i])
+    if float(np.mean(ups @ axis)) < 0.7:
+        return rot.IDENTITY.copy()
     return rot.between(axis, np.array([0.0, 1.0, 0.0]))
 
 
@@ -437,26 +384,27 @@ _TIP_TEMPLATES = {
 
 
 def _tip_vector(
-    skeleton: Skeleton, j: int, grot: np.ndarray, gpos: np.ndarray
+    skeleton: Skeleton, j: int, grot: np.ndarray, gpos: np.ndarray, height: float
 ) -> np.ndarray | None:
     """World vector from joint ``j`` to the mean of its descendants and End Sites
     (fingers for a hand, the toe End Site for a foot), or None if it has none."""
-    points = [
-        gpos[d] for d in range(j + 1, skeleton.num_joints) if _is_ancestor(skeleton.parents, j, d)
-    ]
-    for d in [j] + [
-        k for k in range(j + 1, skeleton.num_joints) if _is_ancestor(skeleton.parents, j, k)
-    ]:
-        for off in skeleton.end_sites.get(d, ()):
+    below = np.zeros(skeleton.num_joints, dtype=bool)
+    below[j] = True
+    for k in range(j + 1, skeleton.num_joints):
+        below[k] = below[skeleton.parents[k]]
+    points = [gpos[k] for k in np.nonzero(below)[0] if k != j]
+    for d in np.nonzero(below)[0]:
+        for off in skeleton.end_sites.get(int(d), ()):
             points.append(gpos[d] + rot.apply(grot[d], np.asarray(off)))
     if not points:
         return None
     tip = np.mean(points, axis=0) - gpos[j]
-    return tip if np.linalg.norm(tip) > 1e-4 * skeleton.height() else None
+    return tip if np.linalg.norm(tip) > 1e-4 * height else None
 
 
 def _chain(parents: np.ndarray, top: int, bottom: int) -> list[int]:
-    """Joints on the path below ``top`` down to ``bottom`` (whose offsets add up to it)."""
+    """Joints on the path below ``top`` down to ``bottom`` (whose offsets add up to it),
+    bottom first."""
     out = []
     j = bottom
     while j != top and j >= 0:
@@ -465,53 +413,59 @@ def _chain(parents: np.ndarray, top: int, bottom: int) -> list[int]:
     return out
 
 
-# Known rigs whose rest pose is not a standing humanoid: a reference pose each.
-_REGISTRY: list[tuple[tuple[str, ...], np.ndarray, np.ndarray]] = []
-
-
-def register_reference(skeleton: Skeleton, reference_lrot: np.ndarray) -> None:
-    """Remember a standing reference pose for rigs with these joint names and offsets."""
-    _REGISTRY.append((skeleton.names, skeleton.offsets.copy(), np.asarray(reference_lrot)))
-
-
-def _registered_reference(skeleton: Skeleton) -> np.ndarray | None:
-    if skeleton.names == C.JOINTS:  # Bandai's own rig (the canonical one has a usable rest)
-        return C.BANDAI_REFERENCE_LROT
-    for names, offsets, ref in _REGISTRY:
-        if names == skeleton.names:
-            scale = max(np.abs(offsets[2:]).max(), 1e-9)
-            if np.abs(offsets[2:] - skeleton.offsets[2:]).max() < 0.02 * scale:
-                return ref
-    return None
-
-
 # --------------------------------------------------------------------------- transfer
+
+
+def _canonical_sources(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """The mapped canonical joints (indices into C.JOINTS, root excluded) and, for every
+    canonical joint but the root, which of them gives its world rotation: its own or, if
+    unmapped, its nearest mapped canonical ancestor's (index into the first array)."""
+    mapped = [ci for ci in range(1, len(C.JOINTS)) if C.JOINTS[ci] in rig.mapping]
+    slot = {ci: i for i, ci in enumerate(mapped)}
+    source = np.zeros(len(C.JOINTS), dtype=int)
+    for ci in range(1, len(C.JOINTS)):
+        source[ci] = slot[ci] if ci in slot else source[C.PARENTS[ci]]
+    return np.array(mapped), source[1:]
+
+
+def _above_mapped(parents: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Mask of the mapped ``joints`` and everything above them."""
+    needed = np.zeros(len(parents), dtype=bool)
+    for j in joints:
+        while j >= 0 and not needed[j]:
+            needed[j] = True
+            j = int(parents[j])
+    return needed
 
 
 def to_canonical(motion: Motion, rig: Rig | None = None, fps: float | None = C.FPS) -> Motion:
     """The motion on the canonical skeleton (at ``fps``; ``None`` keeps the clip's rate)."""
     rig = rig or make_rig(motion.skeleton, motion)
-    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
+    parents = motion.skeleton.parents
+    frames = motion.num_frames
+    mapped, source = _canonical_sources(rig)
+    joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
+    grot = _world_rotations(motion.lrot, parents, _above_mapped(parents, joints))
+    hips = rig.mapping["Hips"]
+    hips_pos = motion.lpos[:, hips]  # in the world: up the chain above the hips
+    p = int(parents[hips])
+    while p >= 0:
+        hips_pos = motion.lpos[:, p] + rot.apply(motion.lrot[:, p], hips_pos)
+        p = int(parents[p])
     # the T-pose rotations do not depend on the world's orientation, so turning a Z-up
     # world upright is one rotation of every global
-    grot, gpos = rot.mul(rig.up, grot), rot.apply(rig.up, gpos)
-    frames = motion.num_frames
-    cgrot = rot.identity((frames, len(C.JOINTS)))
-    for ci, cname in enumerate(C.JOINTS):
-        if ci == 0:  # the canonical root stays on the floor, unrotated; the hips carry the path
-            continue
-        if cname in rig.mapping:
-            j = rig.mapping[cname]
-            cgrot[:, ci] = rot.mul(grot[:, j], rot.inv(rig.tpose[j]))
-        elif ci > 0:
-            cgrot[:, ci] = cgrot[:, C.PARENTS[ci]]
+    g = rot.mul(rig.up, grot[:, joints])
+    for c in rig.corrections:
+        i = int(np.nonzero(joints == c.joint)[0][0])
+        g[:, i] = rot.mul(g[:, i], _correction(c, motion.lrot, motion.lpos))
+    canon = rot.mul(g, rot.inv(rig.tpose[joints]))
+    cgrot = rot.identity((frames, len(C.JOINTS)))  # the canonical root stays unrotated
+    cgrot[:, 1:] = canon[:, source]
     clrot = K.local_from_global(cgrot, C.PARENTS)
     clrot[:, 0] = rot.IDENTITY
-    scale = C.leg_length() / rig.leg_length
-    hips = gpos[:, rig.mapping["Hips"]] * scale
     clpos = np.repeat(C.OFFSETS[None], frames, axis=0)
-    clpos[:, 0] = 0.0
-    clpos[:, 1] = hips
+    clpos[:, 0] = 0.0  # on the floor; the hips carry the path
+    clpos[:, 1] = rot.apply(rig.up, hips_pos) * (C.leg_length() / rig.leg_length)
     out = Motion(C.SKELETON, motion.fps, rot.make_continuous(clrot), clpos)
     if fps is not None:
         out = K.resample(out, fps)
@@ -526,42 +480,56 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
     otherwise they hold the rig's reference pose and the canonical rate is kept.
     """
     sk = rig.skeleton
+    parents = sk.parents
     if like is not None:
-        canon = K.resample_count(canon, like.fps, like.num_frames)
+        if abs(canon.fps - like.fps) > 1e-4 * like.fps or canon.num_frames != like.num_frames:
+            canon = K.resample_count(canon, like.fps, like.num_frames)
+        else:  # same timing (30 vs 1/0.0333333 counts as the same): nothing to resample
+            canon = canon.replace(fps=like.fps)
     frames = canon.num_frames
-    cgrot, cgpos = K.fk(canon.lrot, canon.lpos, C.PARENTS)
     if like is not None:
-        own_lrot = like.lrot
-        own_lpos = like.lpos
+        own_lrot, own_lpos = like.lrot.copy(), like.lpos.copy()
     else:
         own_lrot = np.repeat(rig.reference_lrot[None], frames, axis=0)
         own_lpos = np.repeat(sk.offsets[None], frames, axis=0)
         own_lpos[:, 0] = 0.0
-    roots = sk.parents < 0
-    own_lrot, own_lpos = own_lrot.copy(), own_lpos.copy()
+    mapped, _ = _canonical_sources(rig)
+    joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
+    cgrot = _world_rotations(canon.lrot, C.PARENTS, _above_mapped(C.PARENTS, mapped))
+    target = rot.mul(cgrot[:, mapped], rig.tpose[joints])  # world rotations of mapped joints
+    if like is not None:
+        # joints in between keep the clip's motion: take out what they add to the bones
+        for c in rig.corrections:
+            i = int(np.nonzero(joints == c.joint)[0][0])
+            target[:, i] = rot.mul(target[:, i], rot.inv(_correction(c, own_lrot, own_lpos)))
+    roots = parents < 0
     own_lrot[:, roots] = rot.mul(rig.up, own_lrot[:, roots])  # into the upright world
     own_lpos[:, roots] = rot.apply(rig.up, own_lpos[:, roots])
-    by_joint = {v: k for k, v in rig.mapping.items()}
+    # world rotations are needed only down to the mapped joints' parents
+    needed = _above_mapped(parents, parents[joints][parents[joints] >= 0])
+    slot = np.full(sk.num_joints, -1)
+    slot[joints] = np.arange(len(joints))
     grot = np.empty((frames, sk.num_joints, 4))
-    gpos = np.empty((frames, sk.num_joints, 3))
-    lrot = np.empty_like(grot)
-    lpos = own_lpos.copy()
+    grot[:, 0] = own_lrot[:, 0] if slot[0] < 0 else target[:, slot[0]]
+    for level, above in K.levels(parents):  # a level of the hierarchy at a time
+        level, above = level[needed[level]], above[needed[level]]
+        own = slot[level] < 0
+        grot[:, level[own]] = rot.mul(grot[:, above[own]], own_lrot[:, level[own]])
+        grot[:, level[~own]] = target[:, slot[level[~own]]]
+    lrot, lpos = own_lrot, own_lpos
+    inner = parents[joints] >= 0
+    lrot[:, joints[~inner]] = target[:, ~inner]
+    lrot[:, joints[inner]] = rot.mul(rot.inv(grot[:, parents[joints[inner]]]), target[:, inner])
     hips = rig.mapping["Hips"]
-    hips_world = cgpos[:, C.INDEX["Hips"]] * (rig.leg_length / C.leg_length())
-    for j in range(sk.num_joints):
-        p = int(sk.parents[j])
-        cname = by_joint.get(j)
-        if cname is not None and cname != "joint_Root":
-            grot[:, j] = rot.mul(cgrot[:, C.INDEX[cname]], rig.tpose[j])
-            lrot[:, j] = grot[:, j] if p < 0 else rot.mul(rot.inv(grot[:, p]), grot[:, j])
-        else:
-            lrot[:, j] = own_lrot[:, j]
-            grot[:, j] = lrot[:, j] if p < 0 else rot.mul(grot[:, p], lrot[:, j])
-        if j == hips:
-            lpos[:, j] = (
-                hips_world if p < 0 else rot.apply(rot.inv(grot[:, p]), hips_world - gpos[:, p])
-            )
-        gpos[:, j] = lpos[:, j] if p < 0 else gpos[:, p] + rot.apply(grot[:, p], lpos[:, j])
+    hips_world = canon.lpos[:, C.INDEX["Hips"]] * (rig.leg_length / C.leg_length())
+    above = _chain(parents, -1, int(parents[hips]))[::-1] if parents[hips] >= 0 else []
+    if above:
+        gpos = lpos[:, above[0]]
+        for j in above[1:]:
+            gpos = gpos + rot.apply(grot[:, parents[j]], lpos[:, j])
+        lpos[:, hips] = rot.apply(rot.inv(grot[:, parents[hips]]), hips_world - gpos)
+    else:
+        lpos[:, hips] = hips_world
     back = rot.inv(rig.up)  # and back into the file's world
     lrot[:, roots] = rot.mul(back, lrot[:, roots])
     lpos[:, roots] = rot.apply(back, lpos[:, roots])

@@ -100,13 +100,27 @@ def canonicalize(q: np.ndarray) -> np.ndarray:
 
 
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array. Each
-    quaternion's sign is the product of the flips before it (a cumulative product, not a
-    loop over frames)."""
+    """Flip signs along ``axis`` (time) so neighbouring quaternions agree; new array.
+
+    A quaternion is flipped when an odd number of sign changes lie between it and the
+    first one: a cumulative parity over the dot products of neighbours, no loop over time.
+    """
     q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0)
-    flips = np.where(np.sum(q[1:] * q[:-1], axis=-1) < 0, -1.0, 1.0)
-    signs = np.concatenate([np.ones((1,) + flips.shape[1:]), np.cumprod(flips, axis=0)])
-    return np.moveaxis(q * signs[..., None], 0, axis)
+    if q.shape[0] < 2:
+        return np.moveaxis(q.copy(), 0, axis)
+    change = np.sum(q[1:] * q[:-1], axis=-1) < 0
+    parity = np.zeros(q.shape[:-1], dtype=bool)
+    parity[1:] = np.logical_xor.accumulate(change, axis=0)
+    return np.moveaxis(np.where(parity[..., None], -q, q), 0, axis)
+
+
+def mean(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """The mean rotation along ``axis``: the quaternion that maximises the summed squared
+    agreement with all of them (Markley's eigenvector, the chordal L2 mean), sign-free."""
+    q = normalize(np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0))
+    outer = np.einsum("n...i,n...j->...ij", q, q)
+    _, vectors = np.linalg.eigh(outer)
+    return canonicalize(vectors[..., :, -1])
 
 
 def angle(q: np.ndarray) -> np.ndarray:

@@ -192,6 +192,7 @@ class Result:
     fps: float
     warnings: list[str] = field(default_factory=list)
     suffix: str = "styled"  # of the download's file name
+    rig: dict | None = None  # the request skeleton's mapping, how it was found, confidence
     model: tuple[str, str] = ("", "")
     timer: metrics.StageTimer | None = None
 
@@ -219,7 +220,8 @@ def write_result(
     limits.check_frames(out, settings, what="result")
     with timer.stage("write"):
         text = bvh.dumps(out)
-    return Result(text, out.num_frames, float(out.fps), list(warnings), suffix)
+    rig = clip.rig.report() if clip is not None else None
+    return Result(text, out.num_frames, float(out.fps), list(warnings), suffix, rig)
 
 
 # --- answering (event loop) -----------------------------------------------------------------
@@ -272,6 +274,8 @@ def respond(
             "timings_ms": timings_ms(result),
             "warnings": result.warnings,
         }
+        if result.rig is not None:
+            body["rig"] = result.rig
         return JSONResponse(body, headers=headers)
     filename = _filename(upload_name, result.suffix)
     headers["Content-Disposition"] = f'attachment; filename="{filename}"'

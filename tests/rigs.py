@@ -1,20 +1,33 @@
-"""Exporter-style variants of a real clip, made by code for tests.
+"""Exporter-style variants of real clips, made by code for tests.
 
 Each variant performs exactly the same motion in world space (same joint
 positions) but presents it the way another tool would: other joint names
 (Mixamo, Unreal, 3ds Max Biped, Blender), rotated joint frames (Maya/Bandai
 style, rest pose meaningless), an A-pose rest, an extra root above the hips,
 other channel orders and channel counts.
+
+The rig corpus (:func:`corpus`) goes further, for the mapper that reads rigs by
+structure: every skeleton layout of ``../shared/data`` (or, without it, the CMU
+fixture) renamed to numbers and to random words, with its children shuffled,
+helper, twist and prop bones inserted, turned Z-up, scaled by 0.01 and 100, in an
+A-pose, on a root bone on the floor, and all of that at once; and rigs of other
+tools' conventions rebuilt from the fixture (:func:`rebuild`): Reallusion CC/iClone,
+Maya ``_JNT``, MB-Lab, Kinect v2, Xsens MVN, Second Life, VRoid, Daz Genesis 8 and 9,
+OptiTrack Motive, Vicon Plug-in Gait.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from motion import bvh
+from motion import bvh, retarget
+from motion import kinematics as K
 from motion import rotations as rot
+from motion.rig_mapping import normalise_name
 from motion.skeleton import Motion, Skeleton
 
 FIXTURE = Path(__file__).parent / "data" / "cmu_02_01_walk_30fps.bvh"
@@ -189,3 +202,631 @@ def variants(motion: Motion) -> dict[str, Motion]:
         "maya_random_frames_cm": scaled(random_frames(motion, 7), 5.6),
         "max_biped_z_up": z_up(renamed(motion, CMU_TO_BIPED)),
     }
+
+
+# --------------------------------------------------------------------------- rig corpus
+
+
+@dataclass(frozen=True)
+class CorpusRig:
+    """A corpus rig: its clip, the clip it was made from, which of its joints is which joint
+    of the source (``origin``: name -> source name, for joints that copy one), and the
+    mapping method it should be found by."""
+
+    motion: Motion
+    source: Motion
+    origin: dict[str, str]
+    method: str
+
+
+# One clip per skeleton layout of the shared data (Xia shares CMU's layout, not its actor).
+SHARED_LAYOUTS = {
+    "cmu31": ("cmu-31", "02_01.bvh"),
+    "xia": ("xia", "angry_13_000.bvh"),
+    "daz43": ("cmu-dance-43", "05_20.bvh"),
+    "max31": ("cmu-dance-3dsmax", "94_01_indian_dance.bvh"),
+    "bandai": ("bandai", "dataset-1", "dataset-1_walk_normal_001.bvh"),
+}
+TPOSE_LAYOUTS = ("fixture", "cmu31", "xia", "daz43")  # Y-up T-pose rests an A-pose can bend
+
+
+def cut(motion: Motion, frames: int = 48, fps: float = 30.0) -> Motion:
+    """At most ``frames`` frames at about ``fps`` (every n-th frame), to keep tests quick."""
+    step = max(1, round(motion.fps / fps))
+    out = motion.slice(0, frames * step)
+    return out.replace(lrot=out.lrot[::step], lpos=out.lpos[::step], fps=motion.fps / step)
+
+
+def _with_names(motion: Motion, names: tuple[str, ...]) -> Motion:
+    sk = motion.skeleton
+    return motion.replace(
+        skeleton=Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_sites)
+    )
+
+
+def renamed_numbers(motion: Motion, seed: int = 0) -> Motion:
+    """Every joint named by a number, in no particular order (``j017``)."""
+    perm = np.random.default_rng(seed).permutation(motion.skeleton.num_joints)
+    return _with_names(motion, tuple(f"j{p:03d}" for p in perm))
+
+
+_SYLLABLES = [c + v for c in "bdfgkmnpstvz" for v in "aeiou"]
+
+
+def random_words(count: int, seed: int = 0) -> tuple[str, ...]:
+    """``count`` distinct made-up words that name no body part, side or helper."""
+    from motion.rig_mapping import _word_roles
+
+    rng = np.random.default_rng(seed)
+    out: list[str] = []
+    while len(out) < count:
+        word = "".join(rng.choice(_SYLLABLES, size=int(rng.integers(2, 4))))
+        word = word.capitalize() if rng.random() < 0.5 else word
+        side, roles, helper = _word_roles((word,))[0]
+        if word not in out and not (side or roles or helper or normalise_name(word)[0]):
+            out.append(word)
+    return tuple(out)
+
+
+def renamed_words(motion: Motion, seed: int = 0) -> Motion:
+    """Every joint named by a made-up word."""
+    return _with_names(motion, random_words(motion.skeleton.num_joints, seed))
+
+
+def reordered(motion: Motion, order: list[int]) -> Motion:
+    """The same rig with its joints listed in ``order`` (parents first): BVH children
+    follow the list, so this changes the order of children in the file."""
+    sk = motion.skeleton
+    new_index = {old: new for new, old in enumerate(order)}
+    parents = np.array([-1 if sk.parents[j] < 0 else new_index[int(sk.parents[j])] for j in order])
+    new_sk = Skeleton(
+        tuple(sk.names[j] for j in order),
+        parents,
+        sk.offsets[order],
+        tuple(sk.channels[j] for j in order),
+        {new_index[j]: v for j, v in sk.end_sites.items()},
+    )
+    return Motion(new_sk, motion.fps, motion.lrot[:, order], motion.lpos[:, order])
+
+
+def shuffled_children(motion: Motion, seed: int = 0) -> Motion:
+    """Every joint's children in a random order."""
+    rng = np.random.default_rng(seed)
+    sk = motion.skeleton
+    order: list[int] = []
+
+    def visit(j: int) -> None:
+        order.append(j)
+        for c in rng.permutation(sk.children(j)):
+            visit(int(c))
+
+    visit(0)
+    return reordered(motion, order)
+
+
+# A rebuilt joint: name, parent name (None for the root) and where it is in the world,
+# from the source clip's world rotations (F, J, 4) and positions (F, J, 3) and times (F,).
+Place = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def copy_of(j: int) -> Place:
+    """The source joint ``j`` itself."""
+    return lambda grot, gpos, t: (grot[:, j], gpos[:, j])
+
+
+def fixed_to(j: int, offset, turn=(0.0, 0.0, 0.0)) -> Place:
+    """Rigidly attached to source joint ``j``: at ``offset`` in its frame, turned by the
+    rotation vector ``turn``."""
+    offset, q = np.asarray(offset, dtype=float), rot.from_rotvec(np.asarray(turn, dtype=float))
+    return lambda grot, gpos, t: (
+        rot.mul(grot[:, j], q),
+        gpos[:, j] + rot.apply(grot[:, j], offset),
+    )
+
+
+def twisting(j: int, child_offset, fraction: float = 0.5, degrees: float = 25.0) -> Place:
+    """A twist bone between source joint ``j`` and its child at ``child_offset`` (in ``j``'s
+    frame): ``fraction`` of the way along, turning about the bone by up to ``degrees``."""
+    axis = np.asarray(child_offset, dtype=float)
+    axis = axis / np.linalg.norm(axis)
+
+    def place(grot, gpos, t):
+        q = rot.from_rotvec(np.radians(degrees) * np.sin(2.0 * t)[:, None] * axis)
+        return rot.mul(grot[:, j], q), gpos[:, j] + rot.apply(
+            grot[:, j], fraction * np.asarray(child_offset)
+        )
+
+    return place
+
+
+def on_floor_below(j: int, up: int = 1) -> Place:
+    """Unrotated, on the floor below source joint ``j`` (root motion of game rigs)."""
+
+    def place(grot, gpos, t):
+        pos = gpos[:, j].copy()
+        pos[:, up] = 0.0
+        return rot.identity((len(t),)), pos
+
+    return place
+
+
+def rebuild(
+    motion: Motion, joints: list[tuple[str, str | None, Place]], order: str = "ZXY"
+) -> Motion:
+    """A new rig performing ``motion``: each joint placed in the world by its ``Place``,
+    parents listed first. Joints whose place relative to their parent varies get position
+    channels; the OFFSET is the first frame's, so the rest pose is the source's where the
+    joints copy it."""
+    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
+    t = np.arange(motion.num_frames) / motion.fps
+    names = [n for n, _, _ in joints]
+    parents = np.array([-1 if p is None else names.index(p) for _, p, _ in joints])
+    world = [place(grot, gpos, t) for _, _, place in joints]
+    wrot = np.stack([w[0] for w in world], axis=1)
+    wpos = np.stack([w[1] for w in world], axis=1)
+    prot = np.where((parents >= 0)[None, :, None], wrot[:, np.maximum(parents, 0)], rot.IDENTITY)
+    ppos = np.where((parents >= 0)[None, :, None], wpos[:, np.maximum(parents, 0)], 0.0)
+    lrot = rot.mul(rot.inv(prot), wrot)
+    lpos = rot.apply(rot.inv(prot), wpos - ppos)
+    moves = np.ptp(lpos, axis=0).max(axis=-1) > 1e-6 * max(np.ptp(wpos), 1e-9)
+    rot_ch = tuple(f"{a}rotation" for a in order)
+    pos_ch = ("Xposition", "Yposition", "Zposition")
+    channels = tuple(
+        pos_ch + rot_ch if (p < 0 or mv) else rot_ch for p, mv in zip(parents, moves, strict=True)
+    )
+    leaves = [j for j in range(len(names)) if j not in parents]
+    end_sites = {j: ((0.0, 0.0, 0.0),) for j in leaves}
+    src = {n: i for i, n in enumerate(motion.skeleton.names)}
+    for j, (name, _, _) in enumerate(joints):
+        if name in src and src[name] in motion.skeleton.end_sites:
+            end_sites[j] = motion.skeleton.end_sites[src[name]]
+    sk = Skeleton(tuple(names), parents, lpos[0], channels, end_sites)
+    return Motion(sk, motion.fps, rot.make_continuous(lrot), lpos)
+
+
+def source_mapping(motion: Motion) -> dict[str, int]:
+    """Canonical joint -> index in ``motion`` found by names (the corpus' ground truth)."""
+    return retarget.make_rig(motion.skeleton, motion).mapping
+
+
+def with_helpers(motion: Motion, seed: int = 0) -> Motion:
+    """Twist bones inside the upper arms, forearms, thighs and shins (turning about the
+    bone), twist leaves on them, and a long prop in the right hand: the mapped joints keep
+    their world motion."""
+    rng = np.random.default_rng(seed)
+    sk = motion.skeleton
+    m = source_mapping(motion)
+    by_index = {v: k for k, v in m.items()}
+    pairs = {}
+    for s in ("L", "R"):
+        for a, b in (("UpperArm", "LowerArm"), ("LowerArm", "Hand"), ("UpperLeg", "LowerLeg"),
+                     ("LowerLeg", "Foot")):  # fmt: skip
+            if sk.parents[m[f"{b}_{s}"]] == m[f"{a}_{s}"]:
+                pairs[m[f"{b}_{s}"]] = m[f"{a}_{s}"]
+    height = retarget.make_rig(sk, motion).height
+    joints: list[tuple[str, str | None, Place]] = []
+    for j, name in enumerate(sk.names):
+        parent = None if sk.parents[j] < 0 else sk.names[sk.parents[j]]
+        if j in pairs:
+            a = pairs[j]
+            helper = f"{name}_in"
+            frac = float(rng.uniform(0.3, 0.7))
+            joints.append(
+                (helper, parent, twisting(a, sk.offsets[j], frac, float(rng.uniform(10, 40))))
+            )
+            parent = helper
+        joints.append((name, parent, copy_of(j)))
+        role = by_index.get(j, "")
+        if role.startswith(("UpperArm", "LowerArm", "UpperLeg", "LowerLeg")):
+            joints.append((f"{name}_leaf", name, fixed_to(j, np.zeros(3), (0.0, 0.0, 0.3))))
+        if role == "Hand_R":
+            along = sk.offsets[m["Hand_R"]] / np.linalg.norm(sk.offsets[m["Hand_R"]])
+            joints.append((f"{name}_prop", name, fixed_to(j, 0.35 * height * along)))
+    return rebuild(motion, joints)
+
+
+def root_on_floor(motion: Motion, moving: bool = False) -> Motion:
+    """A new root bone on the floor below the old root (at the origin, or following the
+    hips on the floor with ``moving``): in the rest pose the hips stand a bone above it."""
+    sk = motion.skeleton
+    hips = source_mapping(motion)["Hips"]
+    root: Place = (
+        on_floor_below(hips)
+        if moving
+        else (lambda grot, gpos, t: (rot.identity((len(t),)), np.zeros((len(t), 3))))
+    )
+    joints: list[tuple[str, str | None, Place]] = [("floor_root", None, root)]
+    for j, name in enumerate(sk.names):
+        parent = "floor_root" if sk.parents[j] < 0 else sk.names[sk.parents[j]]
+        joints.append((name, parent, copy_of(j)))
+    return rebuild(motion, joints)
+
+
+def a_pose_by_mapping(motion: Motion) -> Motion:
+    """Rest pose with the upper arms 45 degrees down (world motion unchanged), found by
+    the rig's mapping rather than names."""
+    sk = motion.skeleton
+    m = source_mapping(motion)
+    frames = rot.identity((sk.num_joints,))
+    for s, sign in (("L", 1.0), ("R", -1.0)):
+        frames[m[f"UpperArm_{s}"]] = rot.from_rotvec(np.array([0.0, 0.0, sign * np.pi / 4]))
+    return reframed(motion, frames)
+
+
+def _name_origin(variant: Motion, source: Motion) -> dict[str, str]:
+    return dict(zip(variant.skeleton.names, source.skeleton.names, strict=True))
+
+
+def layout_variants(name: str, motion: Motion) -> dict[str, CorpusRig]:
+    """The corpus' variants of one clip."""
+    out: dict[str, CorpusRig] = {}
+
+    def add(key: str, m: Motion, origin: dict[str, str], method: str = "structure") -> None:
+        out[f"{name}/{key}"] = CorpusRig(m, motion, origin, method)
+
+    same = {n: n for n in motion.skeleton.names}
+    numbers = renamed_numbers(motion, 1)
+    add("numbers", numbers, _name_origin(numbers, motion))
+    words = renamed_words(motion, 2)
+    add("words", words, _name_origin(words, motion))
+    shuffled = shuffled_children(numbers, 3)
+    add(
+        "numbers_shuffled",
+        shuffled,
+        {n: _name_origin(numbers, motion)[n] for n in shuffled.skeleton.names},
+    )
+    helpers = with_helpers(motion, 4)
+    add("helpers", helpers, {n: n for n in helpers.skeleton.names if n in same}, "names")
+    helpers_words = renamed_words(helpers, 5)
+    origin = {
+        w: n
+        for w, n in zip(helpers_words.skeleton.names, helpers.skeleton.names, strict=True)
+        if n in same
+    }
+    add("helpers_words", helpers_words, origin)
+    add("z_up_numbers", z_up(numbers), _name_origin(numbers, motion))
+    add("scaled_0.01_numbers", scaled(numbers, 0.01), _name_origin(numbers, motion))
+    add("scaled_100_words", scaled(words, 100.0), _name_origin(words, motion))
+    floor = root_on_floor(motion)
+    floor_numbers = renamed_numbers(floor, 6)
+    add("root_on_floor_numbers", floor_numbers,
+        {a: b for a, b in zip(floor_numbers.skeleton.names, floor.skeleton.names, strict=True) if b in same})  # fmt: skip
+    moving = renamed_words(root_on_floor(motion, moving=True), 7)
+    add("root_motion_words", moving,
+        {a: b for a, b in zip(moving.skeleton.names, floor.skeleton.names, strict=True) if b in same})  # fmt: skip
+    if name in TPOSE_LAYOUTS:
+        apose = renamed_numbers(a_pose_by_mapping(motion), 8)
+        add("a_pose_numbers", apose, _name_origin(apose, motion))
+    frames = renamed_numbers(random_frames(motion, 9), 10)
+    add("rotated_frames_numbers", frames, _name_origin(frames, motion))
+    everything = scaled(
+        z_up(shuffled_children(renamed_words(with_helpers(motion, 11), 12), 13)), 0.01
+    )
+    helpers11 = with_helpers(motion, 11)
+    words11 = renamed_words(helpers11, 12)
+    origin = {
+        w: n
+        for w, n in zip(words11.skeleton.names, helpers11.skeleton.names, strict=True)
+        if n in same
+    }
+    add("everything", everything, origin)
+    return out
+
+
+def frozen(motion: Motion, names: tuple[str, ...]) -> Motion:
+    """The clip with these joints held at their rest rotation (their children take over
+    their world rotation), so that a rig without them can copy the rest."""
+    sk = motion.skeleton
+    lrot = motion.lrot.copy()
+    for name in names:
+        j = sk.names.index(name)
+        for c in sk.children(j):
+            lrot[:, c] = rot.mul(lrot[:, j], lrot[:, c])
+        lrot[:, j] = rot.IDENTITY
+    return motion.replace(lrot=lrot)
+
+
+# Conventions rebuilt from the CMU fixture: rows (name, parent, how) where how is a source
+# joint to copy, ("at", a, b, f): fixed to source joint a, f of the way to its child b,
+# ("twist", a, b, f): a twist bone between a and b, ("floor",): on the floor at the origin.
+# "{L}", "{l}", "{Left}" expand to each side (L/R, l/r, Left/Right); "{S}" to CMU's L/R.
+def _fingers(name: str, hand: str) -> list[tuple]:
+    """Two fingers (two joints and one) on ``hand``, named ``name.format(k)``."""
+    along = ("at", "{Left}Hand", "{Left}Hand")
+    return [
+        (name.format(1), hand, (*along, 0.8)),
+        (name.format(2), name.format(1), (*along, 1.4)),
+        (name.format(3), hand, (*along, 0.6)),
+    ]
+
+
+_CMU_LEG = ("{Left}UpLeg", "{Left}Leg", "{Left}Foot", "{Left}ToeBase")
+_CMU_ARM = ("{Left}Shoulder", "{Left}Arm", "{Left}ForeArm", "{Left}Hand")
+
+CONVENTION_RIGS: dict[str, tuple[tuple[str, ...], list[tuple]]] = {
+    "Reallusion CC/iClone": ((), [
+        ("RL_BoneRoot", None, ("floor",)),
+        ("CC_Base_Hip", "RL_BoneRoot", "Hips"),
+        ("CC_Base_Pelvis", "CC_Base_Hip", ("at", "Hips", "LowerBack", 0.0)),
+        ("CC_Base_{L}_Thigh", "CC_Base_Pelvis", "{Left}UpLeg"),
+        ("CC_Base_{L}_ThighTwist01", "CC_Base_{L}_Thigh", ("at", "{Left}UpLeg", "{Left}Leg", 0.3)),
+        ("CC_Base_{L}_Calf", "CC_Base_{L}_Thigh", "{Left}Leg"),
+        ("CC_Base_{L}_KneeShareBone", "CC_Base_{L}_Calf", ("at", "{Left}Leg", "{Left}Foot", 0.0)),
+        ("CC_Base_{L}_CalfTwist01", "CC_Base_{L}_Calf", ("at", "{Left}Leg", "{Left}Foot", 0.4)),
+        ("CC_Base_{L}_Foot", "CC_Base_{L}_Calf", "{Left}Foot"),
+        ("CC_Base_{L}_ToeBase", "CC_Base_{L}_Foot", "{Left}ToeBase"),
+        ("CC_Base_{L}_BigToe1", "CC_Base_{L}_ToeBase", ("at", "{Left}ToeBase", "{Left}ToeBase", 0.5)),
+        ("CC_Base_Waist", "CC_Base_Hip", "LowerBack"),
+        ("CC_Base_Spine01", "CC_Base_Waist", "Spine"),
+        ("CC_Base_Spine02", "CC_Base_Spine01", "Spine1"),
+        ("CC_Base_NeckTwist01", "CC_Base_Spine02", "Neck"),
+        ("CC_Base_NeckTwist02", "CC_Base_NeckTwist01", "Neck1"),
+        ("CC_Base_Head", "CC_Base_NeckTwist02", "Head"),
+        ("CC_Base_{L}_Clavicle", "CC_Base_Spine02", "{Left}Shoulder"),
+        ("CC_Base_{L}_Upperarm", "CC_Base_{L}_Clavicle", "{Left}Arm"),
+        ("CC_Base_{L}_UpperarmTwist01", "CC_Base_{L}_Upperarm", ("at", "{Left}Arm", "{Left}ForeArm", 0.0)),
+        ("CC_Base_{L}_Forearm", "CC_Base_{L}_Upperarm", "{Left}ForeArm"),
+        ("CC_Base_{L}_ElbowShareBone", "CC_Base_{L}_Forearm", ("at", "{Left}ForeArm", "{Left}Hand", 0.0)),
+        ("CC_Base_{L}_ForearmTwist01", "CC_Base_{L}_Forearm", ("at", "{Left}ForeArm", "{Left}Hand", 0.5)),
+        ("CC_Base_{L}_Hand", "CC_Base_{L}_Forearm", "{Left}Hand"),
+        *_fingers("CC_Base_{{L}}_Index{}", "CC_Base_{L}_Hand"),
+    ]),
+    "Maya _JNT": ((), [
+        ("hips_JNT", None, "Hips"),
+        *[(f"{{l}}_{n}_JNT", "hips_JNT" if i == 0 else f"{{l}}_{p}_JNT", src)
+          for i, (n, p, src) in enumerate(zip(("upleg", "leg", "foot", "toebase"),
+                                              ("", "upleg", "leg", "foot"), _CMU_LEG, strict=True))],
+        ("spine_JNT", "hips_JNT", "LowerBack"),
+        ("spine1_JNT", "spine_JNT", "Spine"),
+        ("spine2_JNT", "spine1_JNT", "Spine1"),
+        ("neck_JNT", "spine2_JNT", "Neck"),
+        ("neck1_JNT", "neck_JNT", "Neck1"),
+        ("head_JNT", "neck1_JNT", "Head"),
+        *[(f"{{l}}_{n}_JNT", "spine2_JNT" if i == 0 else f"{{l}}_{p}_JNT", src)
+          for i, (n, p, src) in enumerate(zip(("shoulder", "arm", "forearm", "hand"),
+                                              ("", "shoulder", "arm", "forearm"), _CMU_ARM, strict=True))],
+        *_fingers("{{l}}_handIndex{}_JNT", "{l}_hand_JNT"),
+    ]),
+    "MB-Lab": ((), [
+        ("pelvis", None, "Hips"),
+        ("thigh_{L}", "pelvis", "{Left}UpLeg"),
+        ("thigh_twist_{L}", "thigh_{L}", ("twist", "{Left}UpLeg", "{Left}Leg", 0.5)),
+        ("calf_{L}", "thigh_twist_{L}", "{Left}Leg"),
+        ("calf_twist_{L}", "calf_{L}", ("twist", "{Left}Leg", "{Left}Foot", 0.5)),
+        ("foot_{L}", "calf_twist_{L}", "{Left}Foot"),
+        ("toes_{L}", "foot_{L}", "{Left}ToeBase"),
+        ("spine01", "pelvis", "LowerBack"),
+        ("spine02", "spine01", "Spine"),
+        ("spine03", "spine02", "Spine1"),
+        ("neck", "spine03", "Neck"),
+        ("neck_helper", "neck", "Neck1"),
+        ("head", "neck_helper", "Head"),
+        ("clavicle_{L}", "spine03", "{Left}Shoulder"),
+        ("upperarm_{L}", "clavicle_{L}", "{Left}Arm"),
+        ("upperarm_twist_{L}", "upperarm_{L}", ("twist", "{Left}Arm", "{Left}ForeArm", 0.5)),
+        ("lowerarm_{L}", "upperarm_twist_{L}", "{Left}ForeArm"),
+        ("lowerarm_twist_{L}", "lowerarm_{L}", ("twist", "{Left}ForeArm", "{Left}Hand", 0.6)),
+        ("hand_{L}", "lowerarm_twist_{L}", "{Left}Hand"),
+        *_fingers("index_0{}_{{L}}", "hand_{L}"),
+    ]),
+    "Kinect v2": (("LowerBack", "Neck"), [
+        ("SpineBase", None, "Hips"),
+        ("Hip{Left}", "SpineBase", "{Left}UpLeg"),
+        ("Knee{Left}", "Hip{Left}", "{Left}Leg"),
+        ("Ankle{Left}", "Knee{Left}", "{Left}Foot"),
+        ("Foot{Left}", "Ankle{Left}", "{Left}ToeBase"),
+        ("SpineMid", "SpineBase", "Spine"),
+        ("SpineShoulder", "SpineMid", "Spine1"),
+        ("Neck", "SpineShoulder", "Neck1"),
+        ("Head", "Neck", "Head"),
+        ("Shoulder{Left}", "SpineShoulder", "{Left}Arm"),
+        ("Elbow{Left}", "Shoulder{Left}", "{Left}ForeArm"),
+        ("Wrist{Left}", "Elbow{Left}", "{Left}Hand"),
+        ("Hand{Left}", "Wrist{Left}", ("at", "{Left}Hand", "{Left}Hand", 0.4)),
+        ("HandTip{Left}", "Hand{Left}", ("at", "{Left}Hand", "{Left}Hand", 0.8)),
+        ("Thumb{Left}", "Hand{Left}", ("at", "{Left}Hand", "{Left}Hand", 0.5)),
+    ]),
+    "Xsens MVN": (("Neck1",), [
+        ("Pelvis", None, "Hips"),
+        ("L5", "Pelvis", "LowerBack"),
+        ("L3", "L5", "Spine"),
+        ("T12", "L3", ("at", "Spine", "Spine1", 0.5)),
+        ("T8", "T12", "Spine1"),
+        ("Neck", "T8", "Neck"),
+        ("Head", "Neck", "Head"),
+        ("{Left}Shoulder", "T8", "{Left}Shoulder"),
+        ("{Left}UpperArm", "{Left}Shoulder", "{Left}Arm"),
+        ("{Left}ForeArm", "{Left}UpperArm", "{Left}ForeArm"),
+        ("{Left}Hand", "{Left}ForeArm", "{Left}Hand"),
+        ("{Left}UpperLeg", "Pelvis", "{Left}UpLeg"),
+        ("{Left}LowerLeg", "{Left}UpperLeg", "{Left}Leg"),
+        ("{Left}Foot", "{Left}LowerLeg", "{Left}Foot"),
+        ("{Left}Toe", "{Left}Foot", "{Left}ToeBase"),
+    ]),
+    "Second Life (Bento)": (("Neck1",), [
+        ("mPelvis", None, "Hips"),
+        ("mSpine1", "mPelvis", ("at", "Hips", "LowerBack", 0.0)),
+        ("mSpine2", "mSpine1", ("at", "Hips", "LowerBack", 0.0)),
+        ("mTorso", "mSpine2", "LowerBack"),
+        ("mSpine3", "mTorso", "Spine"),
+        ("mSpine4", "mSpine3", ("at", "Spine", "Spine1", 1.0)),
+        ("mChest", "mSpine4", "Spine1"),
+        ("mNeck", "mChest", "Neck"),
+        ("mHead", "mNeck", "Head"),
+        ("mCollar{Left}", "mChest", "{Left}Shoulder"),
+        ("mShoulder{Left}", "mCollar{Left}", "{Left}Arm"),
+        ("mElbow{Left}", "mShoulder{Left}", "{Left}ForeArm"),
+        ("mWrist{Left}", "mElbow{Left}", "{Left}Hand"),
+        ("mHip{Left}", "mPelvis", "{Left}UpLeg"),
+        ("mKnee{Left}", "mHip{Left}", "{Left}Leg"),
+        ("mAnkle{Left}", "mKnee{Left}", "{Left}Foot"),
+        ("mFoot{Left}", "mAnkle{Left}", "{Left}ToeBase"),
+        ("mToe{Left}", "mFoot{Left}", ("at", "{Left}ToeBase", "{Left}ToeBase", 1.0)),
+    ]),
+    "VRoid (VRM)": (("Neck1",), [
+        ("Root", None, ("floor",)),
+        ("J_Bip_C_Hips", "Root", "Hips"),
+        ("J_Bip_C_Spine", "J_Bip_C_Hips", "LowerBack"),
+        ("J_Bip_C_Chest", "J_Bip_C_Spine", "Spine"),
+        ("J_Bip_C_UpperChest", "J_Bip_C_Chest", "Spine1"),
+        ("J_Bip_C_Neck", "J_Bip_C_UpperChest", "Neck"),
+        ("J_Bip_C_Head", "J_Bip_C_Neck", "Head"),
+        ("J_Bip_{L}_Shoulder", "J_Bip_C_UpperChest", "{Left}Shoulder"),
+        ("J_Bip_{L}_UpperArm", "J_Bip_{L}_Shoulder", "{Left}Arm"),
+        ("J_Bip_{L}_LowerArm", "J_Bip_{L}_UpperArm", "{Left}ForeArm"),
+        ("J_Bip_{L}_Hand", "J_Bip_{L}_LowerArm", "{Left}Hand"),
+        ("J_Bip_{L}_UpperLeg", "J_Bip_C_Hips", "{Left}UpLeg"),
+        ("J_Bip_{L}_LowerLeg", "J_Bip_{L}_UpperLeg", "{Left}Leg"),
+        ("J_Bip_{L}_Foot", "J_Bip_{L}_LowerLeg", "{Left}Foot"),
+        ("J_Bip_{L}_ToeBase", "J_Bip_{L}_Foot", "{Left}ToeBase"),
+    ]),
+    "Daz Genesis 8": ((), [
+        ("hip", None, "Hips"),
+        ("pelvis", "hip", ("at", "Hips", "LowerBack", 0.0)),
+        ("{l}ThighBend", "pelvis", "{Left}UpLeg"),
+        ("{l}ThighTwist", "{l}ThighBend", ("twist", "{Left}UpLeg", "{Left}Leg", 0.5)),
+        ("{l}Shin", "{l}ThighTwist", "{Left}Leg"),
+        ("{l}Foot", "{l}Shin", "{Left}Foot"),
+        ("{l}Metatarsals", "{l}Foot", ("at", "{Left}Foot", "{Left}ToeBase", 0.5)),
+        ("{l}Toe", "{l}Metatarsals", "{Left}ToeBase"),
+        ("abdomenLower", "hip", "LowerBack"),
+        ("abdomenUpper", "abdomenLower", "Spine"),
+        ("chestLower", "abdomenUpper", "Spine1"),
+        ("chestUpper", "chestLower", ("at", "Spine1", "Spine1", 0.0)),
+        ("neckLower", "chestUpper", "Neck"),
+        ("neckUpper", "neckLower", "Neck1"),
+        ("head", "neckUpper", "Head"),
+        ("{l}Collar", "chestUpper", "{Left}Shoulder"),
+        ("{l}ShldrBend", "{l}Collar", "{Left}Arm"),
+        ("{l}ShldrTwist", "{l}ShldrBend", ("twist", "{Left}Arm", "{Left}ForeArm", 0.5)),
+        ("{l}ForearmBend", "{l}ShldrTwist", "{Left}ForeArm"),
+        ("{l}ForearmTwist", "{l}ForearmBend", ("twist", "{Left}ForeArm", "{Left}Hand", 0.5)),
+        ("{l}Hand", "{l}ForearmTwist", "{Left}Hand"),
+    ]),
+    "Daz Genesis 9": ((), [
+        ("hip", None, "Hips"),
+        ("pelvis", "hip", ("at", "Hips", "LowerBack", 0.0)),
+        ("{l}_thigh", "pelvis", "{Left}UpLeg"),
+        ("{l}_shin", "{l}_thigh", "{Left}Leg"),
+        ("{l}_foot", "{l}_shin", "{Left}Foot"),
+        ("{l}_toes", "{l}_foot", "{Left}ToeBase"),
+        ("spine1", "hip", "LowerBack"),
+        ("spine2", "spine1", "Spine"),
+        ("spine3", "spine2", "Spine1"),
+        ("spine4", "spine3", ("at", "Spine1", "Spine1", 0.0)),
+        ("neck1", "spine4", "Neck"),
+        ("neck2", "neck1", "Neck1"),
+        ("head", "neck2", "Head"),
+        ("{l}_shoulder", "spine4", "{Left}Shoulder"),
+        ("{l}_upperarm", "{l}_shoulder", "{Left}Arm"),
+        ("{l}_upperarm_twist1", "{l}_upperarm", ("at", "{Left}Arm", "{Left}ForeArm", 0.3)),
+        ("{l}_forearm", "{l}_upperarm", "{Left}ForeArm"),
+        ("{l}_forearm_twist1", "{l}_forearm", ("at", "{Left}ForeArm", "{Left}Hand", 0.3)),
+        ("{l}_hand", "{l}_forearm", "{Left}Hand"),
+    ]),
+    "OptiTrack Motive": (("LowerBack", "Neck"), [
+        ("Skeleton1_Hip", None, "Hips"),
+        ("Skeleton1_Ab", "Skeleton1_Hip", "Spine"),
+        ("Skeleton1_Chest", "Skeleton1_Ab", "Spine1"),
+        ("Skeleton1_Neck", "Skeleton1_Chest", "Neck1"),
+        ("Skeleton1_Head", "Skeleton1_Neck", "Head"),
+        ("Skeleton1_{L}Shoulder", "Skeleton1_Chest", "{Left}Shoulder"),
+        ("Skeleton1_{L}UArm", "Skeleton1_{L}Shoulder", "{Left}Arm"),
+        ("Skeleton1_{L}FArm", "Skeleton1_{L}UArm", "{Left}ForeArm"),
+        ("Skeleton1_{L}Hand", "Skeleton1_{L}FArm", "{Left}Hand"),
+        ("Skeleton1_{L}Thigh", "Skeleton1_Hip", "{Left}UpLeg"),
+        ("Skeleton1_{L}Shin", "Skeleton1_{L}Thigh", "{Left}Leg"),
+        ("Skeleton1_{L}Foot", "Skeleton1_{L}Shin", "{Left}Foot"),
+        ("Skeleton1_{L}Toe", "Skeleton1_{L}Foot", "{Left}ToeBase"),
+    ]),
+    "Vicon Plug-in Gait": (("LowerBack", "Spine", "Neck", "Neck1"), [
+        ("Pelvis", None, "Hips"),
+        ("Thorax", "Pelvis", "Spine1"),
+        ("Head", "Thorax", "Head"),
+        ("{L}Clavicle", "Thorax", "{Left}Shoulder"),
+        ("{L}Humerus", "{L}Clavicle", "{Left}Arm"),
+        ("{L}Radius", "{L}Humerus", "{Left}ForeArm"),
+        ("{L}Hand", "{L}Radius", "{Left}Hand"),
+        ("{L}Femur", "Pelvis", "{Left}UpLeg"),
+        ("{L}Tibia", "{L}Femur", "{Left}Leg"),
+        ("{L}Foot", "{L}Tibia", "{Left}Foot"),
+        ("{L}Toes", "{L}Foot", "{Left}ToeBase"),
+    ]),
+    "Unity humanoid": (("Neck1",), [
+        ("Hips", None, "Hips"),
+        ("Spine", "Hips", "LowerBack"),
+        ("Chest", "Spine", "Spine"),
+        ("UpperChest", "Chest", "Spine1"),
+        ("Neck", "UpperChest", "Neck"),
+        ("Head", "Neck", "Head"),
+        ("{Left}Shoulder", "UpperChest", "{Left}Shoulder"),
+        ("{Left}UpperArm", "{Left}Shoulder", "{Left}Arm"),
+        ("{Left}LowerArm", "{Left}UpperArm", "{Left}ForeArm"),
+        ("{Left}Hand", "{Left}LowerArm", "{Left}Hand"),
+        ("{Left}UpperLeg", "Hips", "{Left}UpLeg"),
+        ("{Left}LowerLeg", "{Left}UpperLeg", "{Left}Leg"),
+        ("{Left}Foot", "{Left}LowerLeg", "{Left}Foot"),
+        ("{Left}Toes", "{Left}Foot", "{Left}ToeBase"),
+    ]),
+}  # fmt: skip
+
+_SIDES = {
+    "L": {"{L}": "L", "{l}": "l", "{Left}": "Left"},
+    "R": {"{L}": "R", "{l}": "r", "{Left}": "Right"},
+}
+
+
+def _sided(text, side: str):
+    if isinstance(text, tuple):
+        return tuple(_sided(t, side) for t in text)
+    if not isinstance(text, str):
+        return text
+    for token, value in _SIDES[side].items():
+        text = text.replace(token, value)
+    return text
+
+
+def convention_rig(source: Motion, convention: str) -> CorpusRig:
+    """The fixture rebuilt as a rig of ``convention`` (:data:`CONVENTION_RIGS`)."""
+    freeze, rows = CONVENTION_RIGS[convention]
+    src = frozen(source, freeze)
+    sk = src.skeleton
+    idx = {n: i for i, n in enumerate(sk.names)}
+    joints: list[tuple[str, str | None, Place]] = []
+    origin: dict[str, str] = {}
+    seen = set()
+    for row in rows:
+        sides = ("L", "R") if any(t in repr(row) for t in ("{L}", "{l}", "{Left}")) else ("L",)
+        for side in sides:
+            name, parent, how = (_sided(x, side) for x in row)
+            if name in seen:
+                continue
+            seen.add(name)
+            if isinstance(how, str):
+                place, origin[name] = copy_of(idx[how]), how
+            elif how[0] == "floor":
+                place = lambda grot, gpos, t: (rot.identity((len(t),)), np.zeros((len(t), 3)))  # noqa: E731
+            else:
+                a, b, f = idx[how[1]], idx[how[2]], how[3]
+                off = sk.offsets[b] if b != a else _tip_offset(sk, a)
+                place = fixed_to(a, f * off) if how[0] == "at" else twisting(a, off, f)
+            joints.append((name, parent, place))
+    return CorpusRig(rebuild(src, joints), src, origin, "names")
+
+
+def _tip_offset(sk: Skeleton, j: int) -> np.ndarray:
+    """A step beyond joint ``j`` in its frame, continuing the bone that reaches it (fingers
+    on a hand, toes on a toe base; the fixture's joint frames are the world's at rest)."""
+    return 0.25 * sk.offsets[j]
+
+
+def corpus(sources: dict[str, Motion]) -> dict[str, CorpusRig]:
+    """The rig corpus: every layout variant of every source clip, and the conventions rebuilt
+    from the CMU fixture (under key ``"fixture"``, or the first source)."""
+    out: dict[str, CorpusRig] = {}
+    for name, motion in sources.items():
+        out.update(layout_variants(name, motion))
+    base = sources.get("fixture", next(iter(sources.values())))
+    for convention in CONVENTION_RIGS:
+        out[f"convention/{convention}"] = convention_rig(base, convention)
+    return out

@@ -30,6 +30,34 @@ def test_info_reports_mapping_and_unmapped_joints():
     assert info["mapping"]["UpperLeg_L"] == "LeftUpLeg" and info["mapping"]["Chest"] == "Spine1"
     assert "LThumb" in info["unmapped"] and info["missing"] == []
     assert info["up_axis"] == "Y" and info["reference_pose"] == "rest"
+    assert info["method"] == "names" and info["confidence"] == 1.0
+    assert info["convention"].startswith("MotionBuilder")
+
+
+def test_info_says_a_rig_without_names_was_mapped_by_structure(tmp_path):
+    path = tmp_path / "numbered.bvh"
+    numbered = rigs.renamed_numbers(rigs.load_fixture())
+    bvh.save(numbered, path)
+    r = run("info", str(path))
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["mappable"] and info["method"] == "structure" and 0 < info["confidence"] <= 1
+    by_name = dict(zip(numbered.skeleton.names, rigs.load_fixture().skeleton.names, strict=True))
+    assert by_name[info["mapping"]["UpperLeg_L"]] == "LeftUpLeg"
+    assert by_name[info["mapping"]["Hand_R"]] == "RightHand"
+
+
+def test_info_on_an_ambiguous_rig_names_the_chains_and_the_way_out(tmp_path):
+    from tests.unit.test_rig_mapping import featureless
+
+    path = tmp_path / "still.bvh"
+    bvh.save(featureless(rigs.load_fixture()), path)
+    r = run("info", str(path))
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert not info["mappable"] and "left from right" in info["error"]
+    assert {c["limbs"] for c in info["ambiguous"]} == {"legs", "arms"}
+    assert "UpperLeg_L" in info["mapping_example"]
 
 
 def test_canonical_and_retarget_write_valid_bvh(tmp_path):
