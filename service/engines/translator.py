@@ -182,6 +182,7 @@ class TransferRequest:
     time_warp: bool = True
     foot_cleanup: bool = True
     mapping: dict[str, str] | None = None
+    format: str | None = None  # of the answer; None: the content's
 
 
 @dataclass
@@ -296,7 +297,13 @@ class TranslatorEngine(Engine):
         and into standardised windows."""
         job = self._style_job(request.style, timer)
         if isinstance(request, TransferRequest):
-            clip = load_clip(request.content, self.settings, timer, mapping=request.mapping)
+            clip = load_clip(
+                request.content,
+                self.settings,
+                timer,
+                mapping=request.mapping,
+                answer=request.format,
+            )
             self._content_job(job, clip.canonical, timer)
             job.clip = clip
             job.strength = request.strength
