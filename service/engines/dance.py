@@ -207,7 +207,7 @@ class DanceEngine(Engine):
         if job.clip is not None:  # the rig's own skeleton, at the requested rate
             with timer.stage("retarget_back"):
                 canon = retarget.from_canonical(canon, job.clip.rig)
-        return write_result(
+        result = write_result(
             None,
             canon,
             self.settings,
@@ -216,6 +216,9 @@ class DanceEngine(Engine):
             suffix=f"dance_{job.genre or 'auto'}",
             fps=job.fps,
         )
+        if job.clip is not None:
+            result.rig = job.clip.rig.report()
+        return result
 
     def _dance(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> DanceResult:
         """The rolled-out poses -> a canonical dance at 30 fps: low-passed, root integrated,
