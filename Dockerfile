@@ -26,10 +26,16 @@ ENV PATH=/opt/venv/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     MOTION_WORKERS=1 \
     MOTION_LOG_FORMAT=json \
-    MOTION_MODELS_DIR=/app/models
+    MOTION_MODELS_DIR=/app/models \
+    MOTION_STYLES_DIR=/var/lib/motion-style/styles
+# Registered styles (POST /v1/styles) live in MOTION_STYLES_DIR: mount a volume there that
+# every replica shares (docker-compose.yml, deploy/k8s/styles-pvc.yaml), or they are lost
+# with the container. The folder is made here so a fresh named volume copies its owner.
 RUN groupadd --system --gid 10001 motion \
  && useradd --system --uid 10001 --gid motion --no-create-home --home-dir /nonexistent \
-      --shell /usr/sbin/nologin motion
+      --shell /usr/sbin/nologin motion \
+ && mkdir -p /var/lib/motion-style/styles \
+ && chown -R 10001:10001 /var/lib/motion-style
 COPY --from=build /opt/venv /opt/venv
 WORKDIR /app
 COPY motion/ motion/

@@ -73,6 +73,16 @@ class Settings(BaseSettings):
         description="onnxruntime intra-op threads per session; default cores // workers",
     )
 
+    styles_dir: Path = Field(
+        Path("styles"),
+        description="folder of the registered styles (POST /v1/styles), relative to the "
+        "working directory; every worker and replica must see the same one",
+    )
+    max_registered_styles: int = Field(
+        100, ge=0, description="registered styles kept at most (0: registration is off)"
+    )
+    max_style_clips: int = Field(32, ge=1, description="clips one style is registered from")
+
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
     log_format: Literal["text", "json"] = Field("text", description="json: one object a line")
 

@@ -9,6 +9,7 @@ from fastapi import Depends, Request
 
 from service.config import Settings
 from service.inference import InferenceRunner
+from service.registered_styles import StyleStore
 from service.registry import ModelRegistry
 
 
@@ -24,6 +25,11 @@ def get_runner(request: Request) -> InferenceRunner:
     return request.app.state.runner
 
 
+def get_styles(request: Request) -> StyleStore:
+    return request.app.state.styles
+
+
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RegistryDep = Annotated[ModelRegistry, Depends(get_registry)]
 InferenceDep = Annotated[InferenceRunner, Depends(get_runner)]
+StylesDep = Annotated[StyleStore, Depends(get_styles)]

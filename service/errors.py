@@ -62,6 +62,13 @@ CATALOGUE: dict[str, ProblemType] = {
         ProblemType("invalid-input", 400, "Invalid input", "a file we read but is malformed"),
         ProblemType("not-found", 404, "Not found", "unknown path, style or model"),
         ProblemType("method-not-allowed", 405, "Method not allowed", "wrong method for a path"),
+        ProblemType(
+            "conflict",
+            409,
+            "Conflict",
+            "a style name taken, a shipped style deleted, the style store full, a style "
+            "registered under another model version",
+        ),
         ProblemType("too-large", 413, "Content too large", "upload, clip or audio over a limit"),
         ProblemType(
             "unsupported-media-type", 415, "Unsupported media type", "a format we do not read"
@@ -73,6 +80,12 @@ CATALOGUE: dict[str, ProblemType] = {
             "overloaded", 503, "Service overloaded", "no inference slot within queue_wait_s"
         ),
         ProblemType("timeout", 504, "Timeout", "inference over request_timeout_s"),
+        ProblemType(
+            "insufficient-storage",
+            507,
+            "Insufficient storage",
+            "the styles folder cannot be written",
+        ),
     )
 }
 
@@ -157,6 +170,19 @@ class NotFound(ServiceError):
     """Unknown style, model or other named resource (404)."""
 
     slug = "not-found"
+
+
+class Conflict(ServiceError):
+    """The request contradicts what is stored: a name taken, a shipped style, a full store
+    (409)."""
+
+    slug = "conflict"
+
+
+class InsufficientStorage(ServiceError):
+    """What should be stored cannot be written (507)."""
+
+    slug = "insufficient-storage"
 
 
 class PayloadTooLarge(ServiceError):
@@ -332,13 +358,35 @@ async def handle_http_exception(request: Request, exc: Exception) -> ProblemResp
     if status == 404 and exc.detail == HTTPStatus.NOT_FOUND.phrase:
         detail = f"No resource at {path}"
     elif status == 405 and exc.detail == HTTPStatus.METHOD_NOT_ALLOWED.phrase:
-        allow = (exc.headers or {}).get("Allow") or (exc.headers or {}).get("allow")
+        allow = _allowed_methods(request) or (exc.headers or {}).get("Allow")
+        if allow:  # Starlette's names the first route of the path only (GET, not POST)
+            exc.headers = {**{k: v for k, v in (exc.headers or {}).items() if k.lower() != "allow"},
+                           "Allow": allow}  # fmt: skip
         detail = f"{method} is not allowed on {path}" + (f"; allowed: {allow}" if allow else "")
     else:
         detail = str(exc.detail)
     return problem_response(
         request.scope, status=status, slug=slug, title=title, detail=detail, headers=exc.headers
     )
+
+
+def _allowed_methods(request: Request) -> str:
+    """The methods the OpenAPI schema documents at the request's path, as an ``Allow``
+    value (empty when the path is not documented)."""
+    from starlette.routing import compile_path
+
+    path = request.scope.get("path", "")
+    try:
+        paths = request.app.openapi().get("paths", {})
+    except Exception:  # a schema that cannot be built must not turn a 405 into a 500
+        return ""
+    methods = {
+        method.upper()
+        for template, operations in paths.items()
+        if compile_path(template)[0].match(path)
+        for method in operations
+    }
+    return ", ".join(sorted(methods))
 
 
 async def handle_unexpected_error(request: Request, exc: Exception) -> ProblemResponse:

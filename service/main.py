@@ -18,6 +18,7 @@ from service.engines import EngineFactory, import_family_engines
 from service.errors import install_error_handlers
 from service.inference import InferenceRunner
 from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
+from service.registered_styles import StyleStore
 from service.registry import ModelRegistry
 from service.routes import dance, debug, health, models, styles, stylize, transfer
 from service.routes import metrics as metrics_routes
@@ -67,6 +68,7 @@ def create_app(
     )
     app.state.settings = settings
     app.state.registry = ModelRegistry(settings, engines)
+    app.state.styles = StyleStore.from_settings(settings)
     app.state.runner = InferenceRunner(
         settings.max_concurrent_inferences,
         settings.request_timeout_s,

@@ -4,12 +4,24 @@ beside the checkout); tests that need it skip with a reason when it is absent.""
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 DATA_DIR = Path(os.environ.get("MOTION_DATA_DIR", REPO.parent / "shared" / "data")).resolve()
+
+
+def pytest_configure(config) -> None:
+    """Registered styles go to a folder of this run (apps and servers read the variable),
+    never to the folder a developer's service keeps."""
+    os.environ["MOTION_STYLES_DIR"] = tempfile.mkdtemp(prefix="motion-styles-")
+
+
+def pytest_unconfigure(config) -> None:
+    shutil.rmtree(os.environ.get("MOTION_STYLES_DIR", ""), ignore_errors=True)
 
 
 def data_path(*parts: str) -> Path:

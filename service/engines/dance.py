@@ -6,7 +6,7 @@ graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
 fed-back pose -> raw features -> Butterworth low-pass -> canonical motion (root integrated)
 -> time warp putting its kinematic beats on the song's beats (``motion.beat_warp``) -> foot
-contacts pinned by IK -> the requested frame rate. Routes retarget it when asked.
+contacts pinned by IK -> the requested frame rate -> onto the request's skeleton, if any.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio, ik, retarget
+from motion import audio, ik
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
@@ -26,7 +26,7 @@ from service import limits
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.metrics import StageTimer
-from service.pipeline import Clip, Result, Upload, load_clip, write_result
+from service.pipeline import Clip, Result, Upload, answer_format, load_clip, write_result
 
 BUCKET = 256  # audio frames: the audio graph runs at multiples of this
 NOISE = 0.05  # std of the seeded noise on the fed-back pose (standardised units)
@@ -43,6 +43,7 @@ class DanceRequest:
     skeleton: Upload | None = None
     fps: float = 30.0
     mapping: dict[str, str] | None = None
+    format: str | None = None  # of the answer; None: the skeleton's, BVH without one
 
 
 @dataclass
@@ -62,6 +63,7 @@ class DanceJob:
     clip: Clip | None = None
     fps: float = DF.FPS
     frames: int = 0  # of the answer at ``fps``
+    format: str | None = None  # of the answer, as asked
 
 
 @dataclass
@@ -146,7 +148,10 @@ class DanceEngine(Engine):
 
     def prepare(self, request: DanceRequest, timer: StageTimer) -> DanceJob:
         """Decode the music (413 over ``max_audio_seconds``, 422 when silent), check the
-        answer's frame count, read the skeleton, compute the music's features."""
+        answer's frame count, read the skeleton (BVH, or a glTF rig: its rest pose when it
+        has no animation), compute the music's features."""
+        if request.skeleton is None:
+            answer_format(None, request.format)  # format=glb without a glTF rig: 400 now
         with timer.stage("decode_audio"):
             samples, sr = limits.decode_audio(request.audio.read(), self.settings)
             audio.check_not_silent(samples)
@@ -156,9 +161,17 @@ class DanceEngine(Engine):
         limits.check_frames(math.ceil(seconds * DF.FPS), self.settings, what="result")
         clip = None
         if request.skeleton is not None:
-            clip = load_clip(request.skeleton, self.settings, timer, mapping=request.mapping)
+            clip = load_clip(
+                request.skeleton,
+                self.settings,
+                timer,
+                mapping=request.mapping,
+                answer=request.format,
+                rest_if_unanimated=True,
+            )
         job = self._job(samples, sr, timer, genre=request.genre, seed=request.seed)
         job.clip, job.fps, job.frames = clip, float(request.fps), frames
+        job.format = request.format
         return job
 
     def _job(
@@ -204,21 +217,17 @@ class DanceEngine(Engine):
             f"beat alignment {result.bas:.2f} (chance {result.bas_chance:.2f}) at "
             f"{result.tempo:.0f} bpm"
         )
-        if job.clip is not None:  # the rig's own skeleton, at the requested rate
-            with timer.stage("retarget_back"):
-                canon = retarget.from_canonical(canon, job.clip.rig)
-        result = write_result(
-            None,
+        return write_result(  # on the rig's own skeleton, if any, at the requested rate
+            job.clip,
             canon,
             self.settings,
             timer,
             warnings=warnings,
             suffix=f"dance_{job.genre or 'auto'}",
             fps=job.fps,
+            like_clip=False,
+            fmt=job.format,
         )
-        if job.clip is not None:
-            result.rig = job.clip.rig.report()
-        return result
 
     def _dance(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> DanceResult:
         """The rolled-out poses -> a canonical dance at 30 fps: low-passed, root integrated,

@@ -45,6 +45,7 @@ class StylizeRequest:
     style_name: str
     foot_cleanup: bool = True
     mapping: dict[str, str] | None = None
+    format: str | None = None  # of the answer; None: the content's
 
 
 @dataclass
@@ -92,7 +93,9 @@ class FastEngine(Engine):
     # --- the three steps ---------------------------------------------------------------------
 
     def prepare(self, request: StylizeRequest, timer: StageTimer) -> FastJob:
-        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping)
+        clip = load_clip(
+            request.content, self.settings, timer, mapping=request.mapping, answer=request.format
+        )
         return self._job(clip.canonical, request.style_name, request.foot_cleanup, timer, clip)
 
     def _job(

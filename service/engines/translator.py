@@ -46,6 +46,7 @@ from service.engines.base import Engine
 from service.errors import InvalidRequest, NotFound
 from service.metrics import StageTimer
 from service.pipeline import Clip, Result, Upload, load_clip, write_result
+from service.registered_styles import StyleStore
 
 BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
@@ -182,6 +183,7 @@ class TransferRequest:
     time_warp: bool = True
     foot_cleanup: bool = True
     mapping: dict[str, str] | None = None
+    format: str | None = None  # of the answer; None: the content's
 
 
 @dataclass
@@ -262,6 +264,7 @@ class TranslatorEngine(Engine):
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
             raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
+        self.registered = StyleStore.from_settings(self.settings)
 
     def styles(self) -> list[dict[str, Any]]:
         return [
@@ -272,13 +275,14 @@ class TranslatorEngine(Engine):
                 "speed": round(self.speed[i], 4),
             }
             for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
-        ]
+        ] + [style.listing() for style in self.registered.all()]
 
     def accepts(self, request: TransferRequest | StyleCodeRequest) -> bool:
-        return all(name in self.index for name in request.style.names())
+        return all(n in self.index or n in self.registered for n in request.style.names())
 
     def refusal(self, request: TransferRequest | StyleCodeRequest) -> NotFound:
-        unknown = next(n for n in request.style.names() if n not in self.index)
+        names = request.style.names()
+        unknown = next(n for n in names if n not in self.index and n not in self.registered)
         return self._unknown(unknown)
 
     def _unknown(self, name: str) -> NotFound:
@@ -296,7 +300,13 @@ class TranslatorEngine(Engine):
         and into standardised windows."""
         job = self._style_job(request.style, timer)
         if isinstance(request, TransferRequest):
-            clip = load_clip(request.content, self.settings, timer, mapping=request.mapping)
+            clip = load_clip(
+                request.content,
+                self.settings,
+                timer,
+                mapping=request.mapping,
+                answer=request.format,
+            )
             self._content_job(job, clip.canonical, timer)
             job.clip = clip
             job.strength = request.strength
@@ -471,7 +481,11 @@ class TranslatorEngine(Engine):
         return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
     def code_of_name(self, name: str) -> StyleCode:
+        """The code of a named style: shipped, or registered (``service.registered_styles``;
+        a file read, so called in the inference pool)."""
         if name not in self.index:
+            if (style := self.registered.lookup(name, self.name, self.version)) is not None:
+                return StyleCode(style.code.copy(), style.velocity, "style_name", speed=style.speed)
             raise self._unknown(name)
         i = self.index[name]
         return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=self.speed[i])
@@ -479,15 +493,12 @@ class TranslatorEngine(Engine):
     def code_of_mix(self, mix: dict[str, float]) -> StyleCode:
         """Weighted mean of named codes (and of their velocity factors; geometric mean of
         their speeds); weights >= 0 with a positive sum (:func:`parse_mix`), normalised."""
-        for name in mix:
-            if name not in self.index:
-                raise self._unknown(name)
-        rows = [self.index[name] for name in mix]
+        styles = [self.code_of_name(name) for name in mix]
         weights = np.array(list(mix.values()), dtype=np.float64)
         weights /= weights.sum()
-        code = (weights[:, None] * self.codes[rows].astype(np.float64)).sum(axis=0)
-        velocity = float(np.dot(weights, [self.velocity[i] for i in rows]))
-        speed = float(np.exp(np.dot(weights, np.log([self.speed[i] for i in rows]))))
+        code = (weights[:, None] * np.stack([s.code for s in styles]).astype(np.float64)).sum(0)
+        velocity = float(np.dot(weights, [s.velocity for s in styles]))
+        speed = float(np.exp(np.dot(weights, np.log([s.speed for s in styles]))))
         return StyleCode(code.astype(np.float32), velocity, "style_mix", speed=speed)
 
     def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:

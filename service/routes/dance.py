@@ -1,4 +1,5 @@
-"""``POST /v1/dance``: music in, a dance as long as the decoded audio out (BVH)."""
+"""``POST /v1/dance``: music in, a dance as long as the decoded audio out (BVH, or the GLB of
+the ``skeleton`` sent with the dance as its animation)."""
 
 from __future__ import annotations
 
@@ -34,7 +35,9 @@ def check_genre(genre: str | None) -> str | None:
     "/v1/dance",
     summary="Generate a dance for a whole song (BVH as long as the decoded audio)",
     response_class=pipeline.Response,
-    responses=pipeline.bvh_responses("BVH on the canonical skeleton, or on `skeleton` when given"),
+    responses=pipeline.bvh_responses(
+        "BVH on the canonical skeleton, or on `skeleton` when given (in its format)"
+    ),
 )
 async def create_dance(
     request: Request,
@@ -43,11 +46,12 @@ async def create_dance(
     genre: Annotated[str | None, Form(description=f"one of {', '.join(DF.GENRES)}")] = None,
     seed: Annotated[int, Form(ge=0, le=2**31 - 1)] = 0,
     skeleton: Annotated[
-        UploadFile | str | None, File(description="BVH (file or text) to retarget onto")
+        UploadFile | str | None,
+        File(description="BVH (file or text) or glTF rig (animated or not) to retarget onto"),
     ] = None,
     fps: Annotated[float, Form(gt=0, le=MAX_FPS)] = 30.0,
     mapping: Annotated[str | None, Form(description="JSON joint-name map")] = None,
-    format: Annotated[pipeline.Format, Query()] = "bvh",  # noqa: A002
+    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
 ) -> pipeline.Response:
     rig = None
     if isinstance(skeleton, str):
@@ -64,6 +68,7 @@ async def create_dance(
         skeleton=rig,
         fps=fps,
         mapping=pipeline.parse_mapping(mapping),
+        format=format,
     )
     result = await pipeline.infer(request, "dance", job)
-    return pipeline.respond(request, result, fmt=format, upload_name=audio.filename)
+    return pipeline.respond(request, result, upload_name=audio.filename)

@@ -15,24 +15,25 @@ router = APIRouter(tags=["stylize"])
 
 @router.post(
     "/v1/stylize",
-    summary="Re-style a BVH clip with one named style (fast feed-forward networks)",
+    summary="Re-style a clip (BVH or GLB) with one named style (fast feed-forward networks)",
     response_class=pipeline.Response,
-    responses=pipeline.bvh_responses("BVH on the content's skeleton and frame rate (or JSON)"),
+    responses=pipeline.bvh_responses("the content's format (or ?format=) on its skeleton and rate"),
 )
 async def stylize_clip(
     request: Request,
     settings: SettingsDep,
-    content: Annotated[UploadFile, File(description="content clip (BVH)")],
+    content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
     style_name: Annotated[str, Form(min_length=1, max_length=100)],
     foot_cleanup: Annotated[bool, Form()] = True,
     mapping: Annotated[str | None, Form(description="JSON joint-name map")] = None,
-    format: Annotated[pipeline.Format, Query()] = "bvh",  # noqa: A002
+    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
 ) -> pipeline.Response:
     job = StylizeRequest(
         content=pipeline.upload(content, settings),
         style_name=style_name,
         foot_cleanup=foot_cleanup,
         mapping=pipeline.parse_mapping(mapping),
+        format=format,
     )
     result = await pipeline.infer(request, "fast", job)
-    return pipeline.respond(request, result, fmt=format, upload_name=content.filename)
+    return pipeline.respond(request, result, upload_name=content.filename)

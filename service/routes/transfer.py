@@ -1,13 +1,14 @@
 """``POST /v1/transfer`` and ``POST /v1/style-code``: the translator (aberman2020).
 
-A style comes from exactly one of: ``style`` (a BVH clip on any humanoid skeleton, mapped
+A style comes from exactly one of: ``style`` (a BVH or glTF clip on any humanoid skeleton, mapped
 like the content, with its own optional ``style_mapping``), ``keypoints`` (a video's 2D
 keypoints: an OpenPose zip or JSON at ``keypoints_fps`` frames per second, default the
 JSON document's rate, else 30),
-``style_name`` (a style of the model's table, ``GET /v1/styles``) or ``style_mix`` (a JSON
+``style_name`` (a style of the model's table or a registered one, ``GET /v1/styles``) or ``style_mix`` (a JSON
 object style name -> weight). None or several: a 400 problem naming the fields.
 
-The result is a BVH on the content's skeleton and frame rate. With ``time_warp`` (default)
+The result is on the content's skeleton and frame rate, in its format (BVH, or its GLB with the
+new animation; ``?format=`` chooses). With ``time_warp`` (default)
 the motion is played faster or slower: for a style clip by the ratio of the style's and the
 content's velocity factors (paper section 3.4), for a named style or mix by the style's
 ``speed`` (how fast it moves against the other styles on the same content, ``GET
@@ -49,7 +50,7 @@ KEYPOINT_TYPES = (
     "text/",
 )
 STYLE_DOC = {
-    "style": "style clip (BVH, any humanoid skeleton)",
+    "style": "style clip (BVH or glTF, any humanoid skeleton)",
     "keypoints": "2D keypoints of a video (OpenPose zip of per-frame JSON files, or JSON)",
     "style_name": "a named style (GET /v1/styles)",
     "style_mix": 'JSON object style name -> weight, e.g. {"happy": 0.7, "old": 0.3}',
@@ -124,20 +125,20 @@ def style_source(fields: StyleFields, settings: Settings) -> StyleSource:
 
 @router.post(
     "/v1/transfer",
-    summary="Re-style a BVH clip by an example clip, a video's keypoints, a name or a mix",
+    summary="Re-style a clip (BVH or GLB) by an example clip, a video's keypoints, a name or a mix",
     response_class=pipeline.Response,
-    responses=pipeline.bvh_responses("BVH on the content's skeleton and frame rate (or JSON)"),
+    responses=pipeline.bvh_responses("the content's format (or ?format=) on its skeleton and rate"),
 )
 async def transfer(
     request: Request,
     settings: SettingsDep,
-    content: Annotated[UploadFile, File(description="content clip (BVH)")],
+    content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
     style_fields: Annotated[StyleFields, Depends(read_style_fields)],
     strength: Annotated[float, Form(ge=0, le=1, description="0 keeps the content's style")] = 1.0,
     time_warp: Annotated[bool, Form(description="warp time by the velocity ratio")] = True,
     foot_cleanup: Annotated[bool, Form(description="pin the content's foot contacts")] = True,
     mapping: Annotated[str | None, Form(description="JSON joint-name map (content)")] = None,
-    format: Annotated[pipeline.Format, Query()] = "bvh",  # noqa: A002
+    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
 ) -> pipeline.Response:
     job = TransferRequest(
         content=pipeline.upload(content, settings),
@@ -146,9 +147,10 @@ async def transfer(
         time_warp=time_warp,
         foot_cleanup=foot_cleanup,
         mapping=pipeline.parse_mapping(mapping),
+        format=format,
     )
     result = await pipeline.infer(request, "translator", job)
-    return pipeline.respond(request, result, fmt=format, upload_name=content.filename)
+    return pipeline.respond(request, result, upload_name=content.filename)
 
 
 @router.post(

@@ -1,13 +1,18 @@
-// The preview page: input and result side by side as animated skeletons (three.js, vendored
-// under ./vendor/three, loaded from this server only).
+// The preview page: input and result side by side as animated characters (three.js, vendored
+// under ./vendor/three, loaded from this server only), on one timeline.
 //
-// It works before any model is served: the input clip is parsed and animated in the browser,
-// and when a POST fails the problem+json detail is shown. Tests read window.motionPreview:
-// {webgl, styles, input: {loaded, frames, fps, frame, ticks}, result: {...}, download: {name,
-// text}, lastMessage}.
+// It works before any model is served: the input clip (BVH, or a glTF character: .glb or
+// .gltf with embedded buffers) is read and animated in the browser, and when a POST fails
+// the problem+json detail is shown. The answer comes in the input's format (a GLB input
+// gets its GLB back with the new animation), and Download saves it as it came.
+//
+// Tests read window.motionPreview: {webgl, styles, playing, time, duration, input: {loaded,
+// frames, fps, frame, ticks, name, format}, result: {...}, download: {name, type, size,
+// bytes, text (BVH only)}, lastMessage}.
 
 import * as THREE from './vendor/three/three.module.min.js';
 import { BVHLoader } from './vendor/three/BVHLoader.js';
+import { GLTFLoader } from './vendor/three/GLTFLoader.js';
 import { OrbitControls } from './vendor/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
@@ -24,26 +29,79 @@ function hasWebGL() {
 const state = {
   webgl: hasWebGL(),
   styles: { translator: [], fast: [], dance: [] },
+  playing: true,
+  time: 0,
+  duration: 0,
   lastMessage: '',
 };
 window.motionPreview = state;
 
 // ---------------------------------------------------------------------------------------------
-// One animated skeleton in one viewport
+// Reading clips: BVH text or glTF bytes, told apart by their first bytes (as the service does)
 
-class SkeletonView {
+function isGltf(bytes) {
+  const head = new TextDecoder().decode(bytes.slice(0, 4096)).replace(/^\uFEFF?\s*/, '');
+  return new TextDecoder().decode(bytes.slice(0, 4)) === 'glTF'
+    || (head.startsWith('{') && head.includes('"asset"'));
+}
+
+// BVHLoader logs to the console before it gives up on a file that is not BVH at all; a
+// quick look at the first word keeps such files out of it.
+function parseBvh(text) {
+  if (!/^\uFEFF?\s*HIERARCHY\b/i.test(text)) {
+    throw new Error('a BVH file starts with HIERARCHY');
+  }
+  const parsed = new BVHLoader().parse(text);
+  if (!parsed.skeleton.bones.length || !parsed.clip.tracks.length) {
+    throw new Error('no joints or no motion in it');
+  }
+  const root = parsed.skeleton.bones[0];
+  return { object: root, clip: parsed.clip, bones: parsed.skeleton.bones, format: 'bvh' };
+}
+
+function parseGltf(bytes) {
+  return new Promise((resolve, reject) => {
+    new GLTFLoader().parse(bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength), '',
+      (gltf) => {
+        const bones = [];
+        gltf.scene.traverse((object) => { if (object.isBone) bones.push(object); });
+        const clip = gltf.animations[0];
+        if (!bones.length) reject(new Error('no skinned character in it'));
+        else if (!clip || !clip.tracks.length) reject(new Error('no animation in it'));
+        else resolve({ object: gltf.scene, clip, bones, format: 'glb' });
+      },
+      (error) => reject(new Error(error && error.message ? error.message : String(error))));
+  });
+}
+
+// bytes (Uint8Array) of a clip -> {object, clip, bones, format}
+async function parseClip(bytes) {
+  if (isGltf(bytes)) return parseGltf(bytes);
+  return parseBvh(new TextDecoder().decode(bytes));
+}
+
+// ---------------------------------------------------------------------------------------------
+// One animated character in one viewport, posed at the shared time
+
+class CharacterView {
   constructor(container, info) {
     this.container = container;
     this.info = info;
-    this.state = { loaded: false, frames: 0, fps: 0, frame: 0, ticks: 0, name: '' };
+    this.state = {
+      loaded: false, frames: 0, fps: 0, frame: 0, ticks: 0, name: '', format: '',
+    };
+    this.duration = 0;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0x1d2126);
-    this.camera = new THREE.PerspectiveCamera(45, 1, 0.1, 10000);
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.1, 10000);
     this.camera.position.set(0, 150, 400);
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 2));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.5);
+    sun.position.set(1, 2, 1.5);
+    this.scene.add(sun);
     this.mixer = null;
     this.action = null;
-    this.root = null;
+    this.object = null;
     this.helper = null;
     this.grid = null;
     this.renderer = null;
@@ -80,59 +138,79 @@ class SkeletonView {
   }
 
   clear() {
-    if (this.root) this.scene.remove(this.root);
-    if (this.helper) this.scene.remove(this.helper);
-    if (this.grid) this.scene.remove(this.grid);
+    for (const part of [this.object, this.helper, this.grid]) if (part) this.scene.remove(part);
     if (this.mixer) this.mixer.stopAllAction();
-    this.root = this.helper = this.grid = this.mixer = this.action = null;
-    Object.assign(this.state, { loaded: false, frames: 0, fps: 0, frame: 0, name: '' });
+    this.object = this.helper = this.grid = this.mixer = this.action = null;
+    this.duration = 0;
+    Object.assign(this.state, {
+      loaded: false, frames: 0, fps: 0, frame: 0, name: '', format: '',
+    });
     this.info.textContent = '';
   }
 
-  // parsed: what BVHLoader.parse returns ({skeleton, clip}).
+  // parsed: what parseClip returns.
   show(parsed, name) {
     this.clear();
-    const track = parsed.clip.tracks[0];
-    const times = track ? track.times : [0];
+    const times = parsed.clip.tracks.reduce(
+      (longest, track) => (track.times.length > longest.length ? track.times : longest), [0],
+    );
     const frames = times.length;
     const frameTime = frames > 1 ? times[1] - times[0] : 1 / 30;
-    this.root = parsed.skeleton.bones[0];
-    this.scene.add(this.root);
-    this.helper = new THREE.SkeletonHelper(this.root);
+    this.object = parsed.object;
+    this.scene.add(this.object);
+    this.helper = new THREE.SkeletonHelper(this.object);
     this.helper.material.linewidth = 2;
+    this.helper.material.depthTest = false;  // the bones show through the mesh
     this.scene.add(this.helper);
-    this.mixer = new THREE.AnimationMixer(this.root);
+    this.mixer = new THREE.AnimationMixer(this.object);
     this.action = this.mixer.clipAction(parsed.clip);
     this.action.play();
+    this.bones = parsed.bones;
     this.frameTime = frameTime;
+    this.start = times[0];
+    this.duration = parsed.clip.duration;
     Object.assign(this.state, {
-      loaded: true, frames, fps: Math.round(1 / frameTime), frame: 0, name,
+      loaded: true, frames, fps: Math.round(1 / frameTime), frame: 0, name, format: parsed.format,
     });
     this.info.textContent = `${name}: ${frames} frames at ${this.state.fps} fps, `
-      + `${parsed.skeleton.bones.length} bones`;
+      + `${parsed.bones.length} bones`;
     this.setPlaceholder('');
-    this.frame(parsed.clip.duration);
+    this.frame();
   }
 
-  // Point the camera at the space the clip moves through (sampled over its duration).
-  frame(duration) {
+  // Pose at time t (seconds on the shared timeline; held at the end after the clip ends).
+  seek(t) {
+    if (!this.action) return;
+    this.action.time = Math.max(0, Math.min(t, this.duration - 1e-6));
+    this.mixer.update(0);
+    const frame = Math.floor((this.action.time - this.start) / this.frameTime + 1e-6);
+    this.state.frame = Math.min(this.state.frames - 1, Math.max(0, frame));
+  }
+
+  // Fit the camera to the space the character moves through (its bones over the clip), so
+  // it fills the view whatever the clip's units.
+  frame() {
     const box = new THREE.Box3();
     const point = new THREE.Vector3();
-    for (let i = 0; i <= 8; i += 1) {
-      this.mixer.setTime((duration * i) / 8);
-      this.root.updateMatrixWorld(true);
-      this.root.traverse((bone) => box.expandByPoint(bone.getWorldPosition(point)));
+    for (let i = 0; i <= 16; i += 1) {
+      this.seek((this.duration * i) / 16);
+      this.object.updateMatrixWorld(true);
+      for (const bone of this.bones) box.expandByPoint(bone.getWorldPosition(point));
     }
-    this.mixer.setTime(0);
+    this.seek(0);
     const size = box.getSize(new THREE.Vector3());
     const centre = box.getCenter(new THREE.Vector3());
     const extent = Math.max(size.x, size.y, size.z, 1e-3);
     this.grid = new THREE.GridHelper(extent * 2, 20, 0x556070, 0x343a42);
     this.grid.position.set(centre.x, box.min.y, centre.z);
     this.scene.add(this.grid);
-    this.camera.near = extent / 100;
-    this.camera.far = extent * 100;
-    this.camera.position.set(centre.x + extent * 0.6, centre.y + extent * 0.3, centre.z + extent * 1.6);
+    // far enough for the box's bounding sphere to fit the vertical field of view, a margin
+    const radius = Math.max(size.length() / 2, 1e-3);
+    const distance = (radius / Math.sin(THREE.MathUtils.degToRad(this.camera.fov / 2))) * 0.85;
+    const direction = new THREE.Vector3(0.35, 0.2, 1).normalize();
+    this.camera.near = distance / 100;
+    this.camera.far = distance * 100;
+    this.camera.position.copy(centre).addScaledVector(direction, distance);
     this.camera.updateProjectionMatrix();
     if (this.controls) {
       this.controls.target.copy(centre);
@@ -142,13 +220,8 @@ class SkeletonView {
     }
   }
 
-  tick(dt) {
+  render() {
     this.state.ticks += 1;
-    if (this.mixer) {
-      this.mixer.update(dt);
-      const frame = Math.floor(this.action.time / this.frameTime + 1e-6);
-      this.state.frame = Math.min(this.state.frames - 1, Math.max(0, frame));
-    }
     if (this.renderer) {
       if (this.controls) this.controls.update();
       this.renderer.render(this.scene, this.camera);
@@ -156,18 +229,54 @@ class SkeletonView {
   }
 }
 
-const inputView = new SkeletonView($('input-view'), $('input-info'));
-const resultView = new SkeletonView($('result-view'), $('result-info'));
+const inputView = new CharacterView($('input-view'), $('input-info'));
+const resultView = new CharacterView($('result-view'), $('result-info'));
 state.input = inputView.state;
 state.result = resultView.state;
-inputView.setPlaceholder('Choose a BVH clip to see it here.');
+inputView.setPlaceholder('Choose a BVH or GLB clip to see it here.');
 resultView.setPlaceholder('Press Run to see the styled clip here.');
+
+// ---------------------------------------------------------------------------------------------
+// One timeline for both views: play/pause, scrub, loop over the longer clip
+
+const TIMELINE_STEPS = 1000;
+
+function updateDuration() {
+  state.duration = Math.max(inputView.duration, resultView.duration);
+  $('timeline').disabled = !state.duration;
+  showTime();
+}
+
+function showTime() {
+  const { time, duration } = state;
+  $('time').textContent = `${time.toFixed(2)} / ${duration.toFixed(2)} s`;
+  $('timeline').value = String(duration ? Math.round((time / duration) * TIMELINE_STEPS) : 0);
+}
+
+function seekAll(time) {
+  state.time = time;
+  inputView.seek(time);
+  resultView.seek(time);
+  showTime();
+}
+
+function setPlaying(playing) {
+  state.playing = playing;
+  const button = $('play');
+  button.textContent = playing ? 'Pause' : 'Play';
+  button.setAttribute('aria-pressed', String(!playing));
+}
 
 const clock = new THREE.Clock();
 function animate() {
   const dt = Math.min(clock.getDelta(), 0.1);
-  inputView.tick(dt);
-  resultView.tick(dt);
+  if (state.playing && state.duration > 0) {
+    let time = state.time + dt;
+    if (time > state.duration) time = 0;  // both start again together
+    seekAll(time);
+  }
+  inputView.render();
+  resultView.render();
   requestAnimationFrame(animate);
 }
 requestAnimationFrame(animate);
@@ -204,21 +313,19 @@ async function describeFailure(response) {
   return `HTTP ${response.status} ${response.statusText}`.trim();
 }
 
-// BVHLoader logs to the console before it gives up on a file that is not BVH at all; a
-// quick look at the first word keeps such files out of it.
-function parseBvh(text) {
-  if (!/^\uFEFF?\s*HIERARCHY\b/i.test(text)) {
-    throw new Error('a BVH file starts with HIERARCHY');
-  }
-  const parsed = new BVHLoader().parse(text);
-  if (!parsed.skeleton.bones.length || !parsed.clip.tracks.length) {
-    throw new Error('no joints or no motion in it');
-  }
-  return parsed;
-}
-
 // ---------------------------------------------------------------------------------------------
-// Styles
+// Styles, grouped by family: the translator's shipped styles, the ones registered from a
+// studio's clips (POST /v1/styles), the fast networks
+
+const GROUPS = [
+  { key: 'translator', label: 'translator: any clip', pick: (s) => !s.registered },
+  { key: 'registered', label: 'registered from your clips', pick: (s) => s.registered },
+  { key: 'fast', label: 'fast networks', pick: () => true },
+];
+
+function familyOf(group) {
+  return group === 'fast' ? 'fast' : 'translator';
+}
 
 function styleNames() {
   const names = new Set();
@@ -239,25 +346,28 @@ async function loadStyles() {
   }
   select.replaceChildren();
   let count = 0;
-  for (const family of ['translator', 'fast']) {
-    const styles = state.styles[family] || [];
+  for (const group of GROUPS) {
+    const styles = (state.styles[familyOf(group.key)] || []).filter(group.pick);
     if (!styles.length) continue;
-    const group = document.createElement('optgroup');
-    group.label = family === 'translator' ? 'any clip (translator)' : 'fast networks';
+    const optgroup = document.createElement('optgroup');
+    optgroup.label = group.label;
+    optgroup.dataset.group = group.key;
     for (const style of styles) {
       const option = new Option(
-        style.clips ? `${style.name} (${style.clips} clips)` : style.name, style.name,
+        style.clips ? `${style.name} (${style.clips} clip${style.clips === 1 ? "" : "s"})` : style.name,
+        style.name,
       );
-      option.dataset.family = family;
-      group.appendChild(option);
+      option.dataset.family = familyOf(group.key);
+      optgroup.appendChild(option);
       count += 1;
     }
-    select.appendChild(group);
+    select.appendChild(optgroup);
   }
   if (!count) select.appendChild(new Option('(no styles are served yet)', ''));
   const list = $('style-names');
   list.replaceChildren(...styleNames().map((name) => new Option(name, name)));
   const genre = $('genre');
+  genre.replaceChildren(new Option('(predict from the music)', ''));
   for (const style of state.styles.dance || []) genre.appendChild(new Option(style.name, style.name));
 }
 
@@ -301,17 +411,20 @@ async function showInput() {
   const file = $('content-file').files[0];
   if (!file) {
     inputView.clear();
-    inputView.setPlaceholder('Choose a BVH clip to see it here.');
+    inputView.setPlaceholder('Choose a BVH or GLB clip to see it here.');
+    updateDuration();
     return;
   }
   try {
-    inputView.show(parseBvh(await file.text()), file.name);
+    inputView.show(await parseClip(new Uint8Array(await file.arrayBuffer())), file.name);
     say(`${file.name} loaded: pick a style and press Run.`);
   } catch (error) {
     inputView.clear();
-    inputView.setPlaceholder('This file could not be read as BVH.');
-    say(`Could not read ${file.name} as BVH: ${error.message}`, 'error');
+    inputView.setPlaceholder('This file could not be read as BVH or glTF.');
+    say(`Could not read ${file.name} as BVH or glTF: ${error.message}`, 'error');
   }
+  updateDuration();
+  seekAll(0);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -335,7 +448,7 @@ function buildRequest() {
     if (content) form.append('skeleton', content);
     return { url: '/v1/dance', form };
   }
-  if (!content) return 'Choose a content BVH clip first.';
+  if (!content) return 'Choose a content clip (BVH or GLB) first.';
   form.append('content', content);
   if (mode === 'name') {
     const option = $('style-name').selectedOptions[0];
@@ -345,9 +458,9 @@ function buildRequest() {
     form.append('strength', strength);
     return { url: '/v1/transfer', form };
   }
-  if (mode === 'bvh') {
+  if (mode === 'clip') {
     const style = $('style-file').files[0];
-    if (!style) return 'Choose a style BVH clip first.';
+    if (!style) return 'Choose a style clip (BVH or GLB) first.';
     form.append('style', style);
   } else if (mode === 'keypoints') {
     const keypoints = $('keypoints-file').files[0];
@@ -362,10 +475,10 @@ function buildRequest() {
   return { url: '/v1/transfer', form };
 }
 
-function filenameOf(response) {
+function filenameOf(response, fallback) {
   const disposition = response.headers.get('content-disposition') || '';
   const match = /filename\*?=(?:UTF-8'')?"?([^";]+)"?/i.exec(disposition);
-  return match ? decodeURIComponent(match[1]) : 'result.bvh';
+  return match ? decodeURIComponent(match[1]) : fallback;
 }
 
 let downloadUrl = null;
@@ -383,24 +496,31 @@ async function run(event) {
   state.download = null;
   say(`Running ${request.url}...`);
   try {
+    // no ?format: the answer comes in the input's format (a GLB input gets its GLB back)
     const response = await fetch(request.url, {
       method: 'POST',
       body: request.form,
-      headers: { Accept: 'text/plain, application/problem+json' },
+      headers: { Accept: 'text/plain, model/gltf-binary, application/problem+json' },
     });
     if (!response.ok) {
       say(`${request.url} failed: ${await describeFailure(response)}`, 'error');
       return;
     }
-    const text = await response.text();
-    const name = filenameOf(response);
-    resultView.show(parseBvh(text), name);
+    const type = (response.headers.get('content-type') || 'text/plain').split(';')[0];
+    const bytes = new Uint8Array(await response.arrayBuffer());
+    const name = filenameOf(response, type === 'model/gltf-binary' ? 'result.glb' : 'result.bvh');
+    resultView.show(await parseClip(bytes), name);
+    updateDuration();
+    seekAll(0);
     if (downloadUrl) URL.revokeObjectURL(downloadUrl);
-    downloadUrl = URL.createObjectURL(new Blob([text], { type: 'text/plain' }));
-    state.download = { name, text };  // what the download button saves (read by tests)
+    downloadUrl = URL.createObjectURL(new Blob([bytes], { type }));
+    // what the download button saves (read by tests)
+    state.download = { name, type, size: bytes.length, bytes };
+    if (type !== 'model/gltf-binary') state.download.text = new TextDecoder().decode(bytes);
     const link = $('download');
     link.href = downloadUrl;
     link.download = name;
+    link.textContent = `Download ${name.split('.').pop().toUpperCase()}`;
     link.hidden = false;
     const timing = response.headers.get('server-timing');
     say(`Done: ${response.headers.get('x-frames') || resultView.state.frames} frames`
@@ -421,12 +541,18 @@ $('mix-add').addEventListener('click', () => addMixRow());
 $('strength').addEventListener('input', () => {
   $('strength-value').textContent = Number($('strength').value).toFixed(2);
 });
-for (const [id, mode] of [['style-name', 'name'], ['style-file', 'bvh'],
+$('play').addEventListener('click', () => setPlaying(!state.playing));
+$('timeline').addEventListener('input', () => {
+  seekAll((Number($('timeline').value) / TIMELINE_STEPS) * state.duration);
+});
+for (const [id, mode] of [['style-name', 'name'], ['style-file', 'clip'],
   ['keypoints-file', 'keypoints'], ['audio-file', 'music'], ['genre', 'music']]) {
   $(id).addEventListener('change', () => {
     document.querySelector(`input[name="mode"][value="${mode}"]`).checked = true;
   });
 }
+setPlaying(true);
+updateDuration();
 addMixRow();
 addMixRow('', 0.5);
 loadStyles();

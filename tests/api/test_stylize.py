@@ -89,7 +89,9 @@ def test_json_format_and_no_cleanup(shared_client, walk):
     response = post(shared_client, walk, STYLES[-1], query="?format=json", foot_cleanup="false")
     assert response.status_code == 200, response.text
     body = response.json()
-    assert set(body) == {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig"}
+    keys = {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig", "source_format"}
+    assert set(body) == keys
+    assert body["source_format"] == "bvh"
     assert body["rig"]["method"] == "names" and 0 < body["rig"]["confidence"] <= 1
     assert "foot_cleanup" not in body["timings_ms"] and "network" in body["timings_ms"]
     assert body["frames"] == bvh.loads(walk).num_frames

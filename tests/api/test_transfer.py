@@ -346,7 +346,9 @@ def test_style_mix_and_json_format(shared_client, walk):
     response = transfer(shared_client, walk, query="?format=json", style_mix=mix)
     assert response.status_code == 200, response.text
     body = response.json()
-    assert set(body) == {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig"}
+    keys = {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig", "source_format"}
+    assert set(body) == keys
+    assert body["source_format"] == "bvh"
     assert body["rig"]["method"] == "names" and body["rig"]["confidence"] == 1.0
     assert body["rig"]["mapping"]["UpperLeg_L"] == "LeftUpLeg"
     assert body["model"] == {"name": ENTRY["name"], "version": ENTRY["version"]}

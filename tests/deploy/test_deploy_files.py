@@ -318,6 +318,30 @@ def test_k8s_service_and_autoscaler_point_at_the_deployment():
     )
 
 
+def test_registered_styles_live_on_a_volume_every_replica_shares():
+    folder = docker_env()["MOTION_STYLES_DIR"]
+    run = " ".join(args for kind, args in final_stage() if kind == "RUN")
+    assert f"mkdir -p {folder}" in run and "chown -R 10001:10001" in run
+
+    compose = yaml.safe_load(COMPOSE.read_text())
+    api = compose["services"]["api"]
+    assert api["environment"]["MOTION_STYLES_DIR"] == folder
+    mounts = {v.split(":")[1]: v.split(":")[0] for v in api["volumes"]}
+    assert mounts[folder] in compose["volumes"], "a named volume, shared by the replicas"
+
+    objects = k8s_objects()
+    spec = objects["Deployment"]["spec"]["template"]["spec"]
+    (container,) = spec["containers"]
+    env = {e["name"]: e["value"] for e in container["env"]}
+    assert env["MOTION_STYLES_DIR"] == folder
+    (mount,) = [m for m in container["volumeMounts"] if m["mountPath"] == folder]
+    (volume,) = [v for v in spec["volumes"] if v["name"] == mount["name"]]
+    claim = objects["PersistentVolumeClaim"]
+    assert volume["persistentVolumeClaim"]["claimName"] == claim["metadata"]["name"]
+    assert claim["spec"]["accessModes"] == ["ReadWriteMany"]  # every pod reads and writes it
+    assert spec["securityContext"]["fsGroup"] == spec["securityContext"]["runAsGroup"]
+
+
 # --- running things -----------------------------------------------------------------------------
 
 

@@ -10,9 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -25,11 +22,16 @@ from motion import kinematics as K
 from motion import rotations as R
 from motion.errors import MotionError
 from tests.conftest import DATA_DIR
-from tests.gltf_files import blender_run, embedded_gltf_bytes, glb_bytes, rig_gltf
+from tests.gltf_files import (
+    NODE_SCRIPT,
+    blender_run,
+    embedded_gltf_bytes,
+    glb_bytes,
+    rig_gltf,
+    three_js_folder,
+    three_js_name,
+)
 from tests.rigs import CMU_TO_MIXAMO, load_fixture, renamed
-
-THREE_VERSION = "0.170.0"  # the release vendored for the preview page (r170)
-NODE_SCRIPT = Path(__file__).resolve().parent.parent / "node" / "gltf_summary.mjs"
 
 
 def quat_about(axis: str, degrees: float) -> np.ndarray:
@@ -359,27 +361,6 @@ def test_blender_glb_moves_like_its_bvh(blender_files, name):
     assert np.abs(K.global_positions(a) - K.global_positions(b)).max() < 1e-3 * height
 
 
-def three_js_folder() -> Path:
-    """A folder with npm ``three`` (installed once into the user's cache) and the script."""
-    npm, node = shutil.which("npm"), shutil.which("node")
-    if npm is None or node is None:
-        pytest.skip("node and npm are not installed (apt-get install nodejs npm)")
-    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "motion-style"
-    folder = cache / f"npm-three-{THREE_VERSION}"
-    loader = folder / "node_modules" / "three" / "examples" / "jsm" / "loaders" / "GLTFLoader.js"
-    if not loader.exists():
-        folder.mkdir(parents=True, exist_ok=True)
-        result = subprocess.run(
-            [npm, "install", "--prefix", str(folder), "--no-audit", "--no-fund",
-             "--loglevel=error", f"three@{THREE_VERSION}"],
-            capture_output=True, text=True, timeout=300,
-        )  # fmt: skip
-        if result.returncode != 0 or not loader.exists():
-            pytest.skip(f"npm could not install three@{THREE_VERSION}: {result.stderr[-300:]}")
-    shutil.copy(NODE_SCRIPT, folder / NODE_SCRIPT.name)
-    return folder
-
-
 @pytest.fixture(scope="module")
 def restyled(blender_files, tmp_path_factory) -> dict[str, tuple[Path, Path, gltf.Motion]]:
     """name -> (GLB from Blender, that GLB with a new motion written in, the motion): the
@@ -417,11 +398,6 @@ def test_three_js_reads_what_we_write(restyled):
         joints = {t.rsplit(".", 1)[0] for t in clip["tracks"]}
         assert joints == {three_js_name(n) for n in motion.skeleton.names}
         assert joints <= set(after["nodes"])
-
-
-def three_js_name(name: str) -> str:
-    """three.js's PropertyBinding.sanitizeNodeName: no whitespace, none of []./:"""
-    return re.sub(r"[\[\]\.:/]", "", re.sub(r"\s", "_", name))
 
 
 def _start_time(path: Path) -> float:
