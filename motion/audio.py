@@ -915,6 +915,11 @@ class AudioFeatures:
     def num_frames(self) -> int:
         return len(self.onset)
 
+    @property
+    def playing(self) -> np.ndarray:
+        """``(F,)`` bool: the music sounds at the frame (RMS above :data:`SILENCE_DBFS`)."""
+        return self.spectral[:, SPECTRAL_COLUMNS.index("rms_db")] > SILENCE_DBFS
+
     def matrix(self) -> np.ndarray:
         """``(F, FEATURE_DIM)`` float32 laid out as MATRIX_COLUMNS."""
         angle = 2.0 * np.pi * self.beat_phase.astype(np.float64)

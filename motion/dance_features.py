@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from motion import audio
+from motion import beat_warp as BW
 from motion import canonical as C
 from motion import contacts as CT
 from motion import kinematics as K
@@ -313,3 +314,81 @@ def smooth_features(x: np.ndarray, cutoff_hz: float = 6.0, order: int = 2) -> np
     out = x.copy()
     out[:, : CONTACTS.start] = filtfilt(b, a, x[:, : CONTACTS.start], axis=0)
     return out.astype(np.float32)
+
+
+STALL_SECONDS = 5.0
+STALL_FRACTION = 0.3
+"""A stall: :data:`STALL_SECONDS` of music in which the dance's mean joint speed stays below
+this share of its median (what a viewer notices as the dancer stopping)."""
+KEEP_MOVING_SECONDS = 2.0
+KEEP_MOVING_FRACTION = 0.6
+KEEP_MOVING_MAX_GAIN = 4.0
+KEEP_MOVING_SMOOTH_SECONDS = 1.0
+
+
+def window_means(x: np.ndarray, length: int) -> np.ndarray:
+    """Mean of ``x (N,)`` over the ``length`` samples centred on each sample (edges: the
+    window shrinks)."""
+    from scipy.ndimage import uniform_filter1d
+
+    x = np.asarray(x, dtype=np.float64)
+    if x.size == 0:
+        return x
+    return uniform_filter1d(x, max(1, min(length, x.size)), mode="nearest")
+
+
+def stalls(speed: np.ndarray, fps: float, playing: np.ndarray | None = None) -> np.ndarray:
+    """Start times ``(S,)`` (seconds) of the :data:`STALL_SECONDS` windows of joint ``speed
+    (N,)`` (``motion.beat_warp.joint_speed``) whose mean is below :data:`STALL_FRACTION` of
+    the median speed, among windows in which the music plays throughout (``playing (N,)``
+    bool, default: everywhere)."""
+    speed = np.asarray(speed, dtype=np.float64)
+    length = int(round(STALL_SECONDS * fps))
+    if speed.size < length or speed.size == 0:
+        return np.zeros(0)
+    playing = np.ones(speed.size, bool) if playing is None else np.asarray(playing, bool)
+    median = float(np.median(speed[playing])) if playing.any() else 0.0
+    sums = np.concatenate([[0.0], np.cumsum(speed)])
+    means = (sums[length:] - sums[:-length]) / length
+    silent = np.concatenate([[0], np.cumsum(~playing)])
+    music = (silent[length:] - silent[:-length]) == 0
+    return np.flatnonzero(music & (means < STALL_FRACTION * median)) / float(fps)
+
+
+def keep_moving(
+    features: np.ndarray, playing: np.ndarray | None = None, fps: float = FPS
+) -> tuple[np.ndarray, Motion]:
+    """Raw features ``(F, MOTION_CHANNELS)`` of a dance whose slow stretches are livened up,
+    and the motion they decode to (:func:`decode`).
+
+    Where the mean joint speed over :data:`KEEP_MOVING_SECONDS` falls below
+    :data:`KEEP_MOVING_FRACTION` of the dance's median while the music plays (``playing
+    (F,)`` bool, default everywhere), the motion's departures from its own Gaussian-smoothed
+    course (:data:`KEEP_MOVING_SMOOTH_SECONDS`: rotations as 6D, hips height, floor velocity
+    and turning) are amplified by the missing factor, at most :data:`KEEP_MOVING_MAX_GAIN`,
+    the gain itself smoothed over a second. The network's autoregressive loop can settle
+    into a near standstill on quiet music, which a viewer sees as the dancer stopping; this
+    keeps the steps it was making, only larger. Two passes (a gain does not raise the speed
+    quite by its factor)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    x = np.asarray(features, dtype=np.float32).copy()
+    playing = np.ones(len(x), bool) if playing is None else np.asarray(playing, bool)
+    channels = slice(0, CONTACTS.start)
+    motion, _ = decode(x, fps=fps)
+    for _ in range(2):
+        if len(x) < 3 or not playing.any():
+            break
+        speed = np.append(BW.joint_speed(K.global_positions(motion), fps), 0.0)
+        reference = KEEP_MOVING_FRACTION * float(np.median(speed[playing]))
+        local = window_means(speed, int(round(KEEP_MOVING_SECONDS * fps)))
+        gain = np.clip(reference / np.maximum(local, 1e-9), 1.0, KEEP_MOVING_MAX_GAIN)
+        gain[~playing] = 1.0
+        gain = gaussian_filter1d(gain, fps, mode="nearest")
+        if gain.max() <= 1.01:
+            break
+        smooth = gaussian_filter1d(x[:, channels], KEEP_MOVING_SMOOTH_SECONDS * fps, axis=0,
+                                   mode="nearest")  # fmt: skip
+        x[:, channels] = smooth + gain[:, None] * (x[:, channels] - smooth)
+        motion, _ = decode(x, fps=fps)
+    return x, motion

@@ -4,7 +4,8 @@ A request's song goes: decoded samples -> per-frame features at 30 fps for its w
 length (``motion.audio``; beats tracked on the song itself) -> standardised -> ``audio``
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
-fed-back pose -> raw features -> Butterworth low-pass -> canonical motion (root integrated)
+fed-back pose -> raw features -> Butterworth low-pass -> stalls livened up -> canonical motion
+(root integrated)
 -> time warp putting its kinematic beats on the song's beats (``motion.beat_warp``) -> foot
 contacts pinned by IK -> the requested frame rate. Routes retarget it when asked.
 """
@@ -133,7 +134,7 @@ class DanceEngine(Engine):
             z = self.rollout(code, vector, start, int(rng.integers(2**31)))
         with timer.stage("decode"):
             raw = DF.smooth_features(self.stats.denormalize_motion(z))
-            motion, _ = DF.decode(raw)
+            _, motion = DF.keep_moving(raw, feats.playing)
         beats = feats.beats
         if beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
@@ -142,11 +143,7 @@ class DanceEngine(Engine):
             with timer.stage("foot_cleanup"):
                 contacts = DF.dance_contacts(K.global_positions(motion), motion.fps)
                 motion = ik.pin_canonical_feet(motion, contacts)
-        bas, chance = 0.0, 0.0
-        if len(beats) >= 3:
-            kin = BW.kinematic_beats(K.global_positions(motion), motion.fps)
-            bas = BW.beat_alignment_score(kin, beats)
-            chance = BW.shifted_grid_baseline(kin, beats, draws=50).mean
+        bas, chance = BW.alignment(motion, beats)
         return DanceResult(
             motion, genre, prob_map, given, float(feats.tempo), beats, bas, chance, warnings
         )
