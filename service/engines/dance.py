@@ -18,10 +18,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio, ik
+from motion import audio
 from motion import beat_warp as BW
 from motion import dance_features as DF
-from motion import kinematics as K
 from motion.skeleton import Motion
 from service.engines import register_engine
 from service.engines.base import Engine
@@ -141,8 +140,7 @@ class DanceEngine(Engine):
                 motion = BW.warp_to_beats(motion, beats).motion
         if foot_cleanup:
             with timer.stage("foot_cleanup"):
-                contacts = DF.dance_contacts(K.global_positions(motion), motion.fps)
-                motion = ik.pin_canonical_feet(motion, contacts)
+                motion = DF.clean_feet(motion)
         bas, chance = BW.alignment(motion, beats)
         return DanceResult(
             motion, genre, prob_map, given, float(feats.tempo), beats, bas, chance, warnings
