@@ -556,12 +556,15 @@ def beat_onset_strength(samples: np.ndarray, sr: int) -> np.ndarray:
     return _beat_envelope(_onset_mel(_prepare_samples(samples, sr)))
 
 
-def _beat_envelope(mel: np.ndarray) -> np.ndarray:
+def _beat_levels(mel: np.ndarray) -> np.ndarray:
+    """``log(1 + BEAT_COMPRESSION * magnitude / loudest)`` of mel power ``(T, bands)``."""
     magnitude = np.sqrt(mel)
     scale = float(np.percentile(magnitude, 99.9)) if magnitude.size else 0.0
-    if not scale > 0:
-        return np.zeros(len(mel), np.float32)
-    levels = np.log1p((BEAT_COMPRESSION / scale) * magnitude)
+    return np.log1p((BEAT_COMPRESSION / max(scale, 1e-12)) * magnitude)
+
+
+def _beat_envelope(mel: np.ndarray, levels: np.ndarray | None = None) -> np.ndarray:
+    levels = _beat_levels(mel) if levels is None else levels
     return _rise_envelope(levels, lambda rise: rise @ _BEAT_BAND_WEIGHTS)
 
 
@@ -689,7 +692,9 @@ def _block_autocorrelation(onset: np.ndarray, window: int, block: int) -> np.nda
         ac = scipy.fft.irfft(spectrum.real**2 + spectrum.imag**2, n=n_fft, axis=1)[:, :window]
         peak = np.abs(ac).max(axis=1, keepdims=True)
         ac /= np.where(peak > 1e-30, peak, 1.0)
-        np.add.at(out, starts // block, ac)
+        out[lo // block : lo // block + -(-len(starts) // block)] += np.add.reduceat(
+            ac, np.arange(0, len(starts), block), axis=0
+        )
     return out
 
 
@@ -745,23 +750,21 @@ def _beat_dp(
     the beat period (frames) expected before each frame."""
     nearest, farthest = max(1, round(periods.min() / 2.0)), round(2.0 * periods.max())
     gaps = np.arange(nearest, farthest + 1)  # candidate distances to the previous beat
-    log_gaps = np.log(gaps)
-    log_periods = np.log(periods)
-    constant = bool(np.all(periods == periods[0]))
-    penalty = tightness * (log_gaps - log_periods[0]) ** 2
+    # penalties per distinct period (a local tempo takes few values: rounded to 0.1 %)
+    keys = np.round(np.log(periods) * 1000.0).astype(np.int64)
+    distinct, which = np.unique(keys, return_inverse=True)
+    penalties = tightness * (np.log(gaps)[None, :] - distinct[:, None] / 1000.0) ** 2
     count = len(local)
     cumulative = np.empty(count)
     backlink = np.full(count, -1, dtype=np.int64)
     threshold = 0.01 * local.max()
     started = False
     for i in range(count):
-        usable = gaps[gaps <= i]  # previous beats must lie at or after frame 0
+        usable = gaps if i >= gaps[-1] else gaps[gaps <= i]  # beats at or after frame 0
         best_prev = -1
         best = 0.0
         if usable.size:
-            if not constant:
-                penalty = tightness * (log_gaps - log_periods[i]) ** 2
-            scores = cumulative[i - usable] - penalty[: usable.size]
+            scores = cumulative[i - usable] - penalties[which[i], : usable.size]
             k = int(np.argmax(scores))  # first maximum = nearest predecessor, as librosa
             best_prev, best = i - int(usable[k]), float(scores[k])
         cumulative[i] = local[i] + best if best_prev >= 0 else local[i]
@@ -811,23 +814,27 @@ BAR_LENGTHS = (4, 3)
 TRIPLE_MARGIN = 1.25
 
 
-def downbeats(beats: np.ndarray, mel: np.ndarray, frame_rate: float = ONSET_FRAME_RATE):
+def downbeats(
+    beats: np.ndarray,
+    mel: np.ndarray,
+    frame_rate: float = ONSET_FRAME_RATE,
+    levels: np.ndarray | None = None,
+):
     """Downbeat times ``(D,)`` (a subset of ``beats (B,)``, seconds) and beats per bar.
 
     Each beat gets an accent: the rise of the low bands (kick, bass) within 50 ms of it,
     plus how much the spectrum of the beat after it differs from the beat before (chords
     change at bar lines), each standardised over the song. The bar length (4, or 3 if its
     best phase scores :data:`TRIPLE_MARGIN` times 4's) and phase are those whose beats are
-    most accented above the others. ``mel (T, ONSET_N_MELS)``: the onset mel power.
+    most accented above the others. ``mel (T, ONSET_N_MELS)``: the onset mel power
+    (``levels``: its compressed magnitudes, when already computed).
     Fewer than two bars of beats: no downbeats.
     """
     beats = np.asarray(beats, dtype=np.float64)
     if beats.size < 2 * max(BAR_LENGTHS) or len(mel) == 0:
         return beats[:0], 0
     frames = np.clip(np.round(beats * frame_rate).astype(np.int64), 0, len(mel) - 1)
-    magnitude = np.sqrt(mel)
-    scale = max(float(np.percentile(magnitude, 99.9)), 1e-12)
-    levels = np.log1p((BEAT_COMPRESSION / scale) * magnitude)
+    levels = _beat_levels(mel) if levels is None else levels
     low = _ONSET_MEL_HZ < BEAT_LOW_HZ
     low_rise = _rise_envelope(levels[:, low], lambda rise: rise.mean(axis=1))
     reach = max(1, int(round(0.05 * frame_rate)))
@@ -849,6 +856,35 @@ def downbeats(beats: np.ndarray, mel: np.ndarray, frame_rate: float = ONSET_FRAM
         best[bar] = (max(scores), int(np.argmax(scores)))
     bar = 3 if best[3][0] > TRIPLE_MARGIN * max(best[4][0], 1e-9) else 4
     return beats[best[bar][1] :: bar], bar
+
+
+HALF_BEAT_SHARE = 0.45
+""":func:`pulses` counts the half-beats too when their onsets are this strong next to the
+beats' (the beat envelope's peak within 50 ms, averaged over the song)."""
+
+
+def pulses(beats: np.ndarray, envelope: np.ndarray, frame_rate: float = ONSET_FRAME_RATE):
+    """The music's strong pulses ``(P,)`` (seconds): ``beats (B,)``, and the points halfway
+    between them when the song accents those nearly as much (:data:`HALF_BEAT_SHARE`) and
+    the doubled tempo stays under :data:`MAX_BPM`. A song at 180 bpm whose kick and snare
+    alternate on every beat is tracked at 90 (the prior's octave, which 90-bpm rumbas with
+    strong eighths need too): its dance should still land on every hit."""
+    beats = np.asarray(beats, dtype=np.float64)
+    envelope = np.asarray(envelope, dtype=np.float64)
+    if beats.size < 2 or envelope.size == 0:
+        return beats
+    if 2 * 60.0 / float(np.median(np.diff(beats))) > MAX_BPM:
+        return beats
+    mids = 0.5 * (beats[:-1] + beats[1:])
+    reach = max(1, int(round(0.05 * frame_rate)))
+
+    def peaks(times):
+        frames = np.clip(np.round(times * frame_rate).astype(np.int64), 0, len(envelope) - 1)
+        return np.array([envelope[max(0, f - reach) : f + reach + 1].max() for f in frames])
+
+    if peaks(mids).mean() < HALF_BEAT_SHARE * max(peaks(beats).mean(), 1e-12):
+        return beats
+    return np.sort(np.concatenate([beats, mids]))
 
 
 def beat_phase(
@@ -897,7 +933,9 @@ class AudioFeatures:
     ``[0, 1)``; ``beats`` ``(B,)`` beat times in seconds (:func:`beat_onset_strength`,
     :func:`track_beats`); ``tempo`` in bpm (0 when no beat was found); ``downbeats``
     ``(D,)`` the beats that start a bar of ``beats_per_bar`` (:func:`downbeats`; empty and 0
-    when the song has under two bars). Values are in the units stated, not normalised: networks normalise them with
+    when the song has under two bars); ``pulses`` ``(P,)`` the beats and, where the song
+    accents them as much, the half-beats (:func:`pulses`: what a dance should land on).
+    Values are in the units stated, not normalised: networks normalise them with
     statistics saved at training time.
     """
 
@@ -910,6 +948,7 @@ class AudioFeatures:
     tempo: float
     downbeats: np.ndarray
     beats_per_bar: int
+    pulses: np.ndarray
 
     @property
     def num_frames(self) -> int:
@@ -949,8 +988,10 @@ def frame_features(
     mel, spectral = _spectral_frames(y, centres)
     onset_mel = _onset_mel(y)
     envelope = _onset_from_log_mel(_db(onset_mel), np.mean)
-    tempo, beats = track_beats(_beat_envelope(onset_mel), ONSET_FRAME_RATE)
-    bar_starts, bar = downbeats(beats, onset_mel)
+    levels = _beat_levels(onset_mel)
+    beat_envelope = _beat_envelope(onset_mel, levels)
+    tempo, beats = track_beats(beat_envelope, ONSET_FRAME_RATE)
+    bar_starts, bar = downbeats(beats, onset_mel, levels=levels)
     onset = _onset_at_frames(envelope, num_frames, fps)
     phase = beat_phase(beats, num_frames, fps, period=60.0 / tempo if tempo > 0 else None)
     return AudioFeatures(
@@ -963,6 +1004,7 @@ def frame_features(
         tempo=tempo,
         downbeats=bar_starts,
         beats_per_bar=bar,
+        pulses=pulses(beats, beat_envelope),
     )
 
 

@@ -40,7 +40,10 @@ SIGMA_SECONDS = 0.05
 SMOOTH_SECONDS = 1.0 / 12.0
 WARP_MAX_STRETCH = 1.35
 """Playback rate :func:`warp_to_beats` allows between anchors: within ``[1 / s, s]``."""
-WARP_ITERATIONS = 5
+WARP_ITERATIONS = 8
+WARP_MAX_SHARE = 0.5
+"""A kinematic beat is moved onto a music beat up to this share of the beat period away (and
+``max_shift`` seconds): at half, any kinematic beat may go to its nearest beat."""
 
 
 def joint_speed(gpos: np.ndarray, fps: float) -> np.ndarray:
@@ -210,11 +213,12 @@ def match_beats(
     *,
     max_shift: float = 0.2,
     max_stretch: float = 1.25,
+    max_share: float = WARP_MAX_SHARE,
 ) -> np.ndarray:
     """Monotone anchor pairs ``(A, 2)`` (music beat, kinematic beat) in seconds.
 
     Each kinematic beat is paired with its nearest music beat when they are within
-    ``max_shift`` seconds (and a third of the local beat period); a music beat takes at most
+    ``max_shift`` seconds (and ``max_share`` of the local beat period); a music beat takes at most
     one kinematic beat (the nearest); pairs whose time map between neighbours would need a
     playback rate outside ``[1 / max_stretch, max_stretch]`` are dropped, greedily in time.
     """
@@ -226,7 +230,7 @@ def match_beats(
     nearest = np.where(np.abs(kin - music[j - 1]) <= np.abs(kin - music[j]), j - 1, j)
     period = np.interp(kin, music[1:], np.diff(music))
     dist = np.abs(kin - music[nearest])
-    ok = (dist <= max_shift) & (dist <= period / 3.0)
+    ok = (dist <= max_shift) & (dist <= period * max_share)
     best: dict[int, tuple[float, float]] = {}
     for k, m, d in zip(kin[ok], nearest[ok], dist[ok], strict=True):
         if int(m) not in best or d < abs(best[int(m)][1] - music[m]):
@@ -250,6 +254,7 @@ def warp_to_beats(
     max_shift: float = 0.2,
     max_stretch: float = WARP_MAX_STRETCH,
     iterations: int = WARP_ITERATIONS,
+    max_share: float = WARP_MAX_SHARE,
 ) -> WarpResult:
     """``motion`` retimed so that its kinematic beats near music beats fall on them.
 
@@ -280,7 +285,8 @@ def warp_to_beats(
             at = np.interp(mids, out_t, src_t)
             rate = np.diff(src_t) * fps
             kin = speed_minima(np.interp(at, mids, speed) * rate, fps)
-        anchors = match_beats(kin, music_beats, max_shift=max_shift, max_stretch=max_stretch)
+        anchors = match_beats(kin, music_beats, max_shift=max_shift, max_stretch=max_stretch,
+                              max_share=max_share)  # fmt: skip
         first = anchors if first is None else first
         if len(anchors) < 2:
             break

@@ -207,24 +207,17 @@ class WindowSampler:
         weights = np.array([s.frames - self.window for s in pool], dtype=np.float64)
         return pool[self.rng.choice(len(pool), p=weights / weights.sum())]
 
-    def batch(
-        self, size: int, beat_dropout: float = 0.1, window: int | None = None,
-        music_only: bool = False,
-    ):  # fmt: skip
-        """Windows of ``window`` frames (default the sampler's), all with music when
-        ``music_only``: ``audio (B, T, A)``, ``motion (B, T, M)``, genre and has-music."""
-        window = window or self.window
+    def batch(self, size: int, beat_dropout: float = 0.1):
         audio, motion, genre, music = [], [], [], []
         for _ in range(size):
-            silent = not music_only and self.rng.random() < self.cmu_share
-            pool = [s for s in (self.silent if silent else self.music) if s.frames > window]
-            s = self._pick(pool)
-            t0 = int(self.rng.integers(0, s.frames - window))
-            a = self.audio[id(s)][t0 : t0 + window].copy()
+            silent = self.rng.random() < self.cmu_share
+            s = self._pick(self.silent if silent else self.music)
+            t0 = int(self.rng.integers(0, s.frames - self.window))
+            a = self.audio[id(s)][t0 : t0 + self.window].copy()
             if s.has_music and s.trusted and self.rng.random() < beat_dropout:
                 a[:, DF.BEAT_COLUMNS] = 0.0
             audio.append(a)
-            motion.append(self.motion[id(s)][t0 : t0 + window])
+            motion.append(self.motion[id(s)][t0 : t0 + self.window])
             genre.append(s.genre)
             music.append(s.has_music)
         return (
@@ -303,60 +296,6 @@ class DanceNet(nn.Module):
             use_gt = t < warm or (gt_mask is not None and bool(gt_mask[t]))
             prev = motion[:, t] if use_gt else pose
         return torch.stack(outs, dim=1)
-
-
-class GenreCritic(nn.Module):
-    """A genre classifier of standardised motion windows ``(B, T, M)`` -> logits ``(B, 4)``
-    over :data:`DF.MUSIC_GENRES`: three temporal convolutions, then the mean over time.
-    Trained on real training windows only, then frozen: its cross-entropy on the network's
-    free-running windows asks them to look like the genre they were given."""
-
-    def __init__(self, width: int = 64) -> None:
-        super().__init__()
-        self.net = nn.Sequential(
-            nn.Conv1d(DF.MOTION_CHANNELS, width, 5, padding=2),
-            nn.ReLU(),
-            nn.Conv1d(width, width, 5, stride=2, padding=2),
-            nn.ReLU(),
-            nn.Conv1d(width, width, 5, stride=2, padding=2),
-            nn.ReLU(),
-        )
-        self.head = nn.Linear(width, len(DF.MUSIC_GENRES))
-
-    def forward(self, motion: torch.Tensor) -> torch.Tensor:
-        return self.head(self.net(motion.transpose(1, 2)).mean(dim=-1))
-
-
-def train_critic(sampler, val_sampler, args, log=print) -> GenreCritic:
-    """A :class:`GenreCritic` trained for ``args.critic_steps`` on real music windows of
-    ``args.genre_window`` frames; its accuracy on the validation songs' windows is logged."""
-    critic = GenreCritic()
-    optimiser = torch.optim.Adam(critic.parameters(), lr=1e-3)
-    for _ in range(args.critic_steps):
-        _, motion, genre, _ = sampler.batch(64, 0.0, args.genre_window, music_only=True)
-        loss = nn.functional.cross_entropy(critic(motion), genre)
-        optimiser.zero_grad()
-        loss.backward()
-        optimiser.step()
-    critic.eval()
-    with torch.no_grad():
-        _, motion, genre, _ = val_sampler.batch(256, 0.0, args.genre_window, music_only=True)
-        accuracy = float((critic(motion).argmax(-1) == genre).float().mean())
-    log(f"genre critic: {args.critic_steps} steps, validation windows {accuracy:.0%} right")
-    for p in critic.parameters():
-        p.requires_grad_(False)
-    return critic
-
-
-def genre_motion_loss(model, critic, sampler, args) -> torch.Tensor:
-    """Cross-entropy of the critic on free-running windows (after ``args.warm`` ground-truth
-    frames) generated with each window's own genre."""
-    audio, motion, genre, _ = sampler.batch(args.genre_batch, 0.1, args.genre_window,
-                                            music_only=True)  # fmt: skip
-    code, _ = model.encode_audio(audio)
-    onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
-    pred = model.rollout(code, onehot, motion, None, warm=args.warm)
-    return nn.functional.cross_entropy(critic(pred[:, args.warm :]), genre)
 
 
 def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.Tensor:
@@ -442,15 +381,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--hidden", type=int, default=Config.hidden)
     for name, value in WEIGHTS.items():
         p.add_argument(f"--w-{name}", type=float, default=value, help=f"{name} loss weight")
-    p.add_argument(
-        "--w-genre-motion",
-        type=float,
-        default=0.0,
-        help="weight of the genre critic's cross-entropy on free-running windows",
-    )
-    p.add_argument("--genre-batch", type=int, default=16)
-    p.add_argument("--genre-window", type=int, default=150, help="frames per critic window")
-    p.add_argument("--critic-steps", type=int, default=600)
     p.add_argument("--val-every", type=int, default=500)
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--checkpoint", type=Path, default=CHECKPOINT)
@@ -463,7 +393,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best, critic=None):
+def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
     tmp = path.with_suffix(".tmp")
@@ -478,7 +408,6 @@ def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best
             "start_poses": poses,
             "best_val": best,
             "saved_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            **({"critic": critic.state_dict()} if critic is not None else {}),
         },
         tmp,
     )
@@ -517,12 +446,11 @@ def train_step(model, losses, batch, args, rng, step, weights) -> dict[str, torc
 
 
 @torch.no_grad()
-def validate(model, losses, val_batches, critic=None) -> dict[str, float]:
-    """Mean losses over fixed validation windows, free-running after the warm-up frames;
-    with a critic, how often it names the genre of the free-running windows."""
+def validate(model, losses, val_batches) -> dict[str, float]:
+    """Mean losses over fixed validation windows, free-running after the warm-up frames."""
     model.eval()
     totals: dict[str, float] = {}
-    correct = count = recognised = 0
+    correct = count = 0
     for audio, motion, genre, music in val_batches:
         code, logits = model.encode_audio(audio)
         onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
@@ -531,12 +459,7 @@ def validate(model, losses, val_batches, critic=None) -> dict[str, float]:
             totals[k] = totals.get(k, 0.0) + float(v) / len(val_batches)
         correct += int((logits[music].argmax(-1) == genre[music]).sum())
         count += int(music.sum())
-        if critic is not None:
-            named = critic(pred[:, 8:]).argmax(-1)
-            recognised += int((named[music] == genre[music]).sum())
     totals["genre_acc"] = correct / max(count, 1)
-    if critic is not None:
-        totals["critic_acc"] = recognised / max(count, 1)
     model.train()
     return totals
 
@@ -567,14 +490,6 @@ def train(args: argparse.Namespace) -> None:
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
-    critic = None
-    if args.w_genre_motion > 0:
-        if ckpt is not None and "critic" in ckpt:
-            critic = GenreCritic()
-            critic.load_state_dict(ckpt["critic"])
-            critic.eval().requires_grad_(False)
-        else:
-            critic = train_critic(sampler, val_sampler, args, log=print)
     tb = None
     try:
         from torch.utils.tensorboard import SummaryWriter
@@ -593,9 +508,6 @@ def train(args: argparse.Namespace) -> None:
         for group in optimiser.param_groups:
             group["lr"] = lr
         parts = train_step(model, losses, sampler.batch(args.batch), args, rng, step, weights)
-        if critic is not None:
-            parts["genre_motion"] = genre_motion_loss(model, critic, sampler, args)
-            parts["total"] = parts["total"] + args.w_genre_motion * parts["genre_motion"]
         optimiser.zero_grad()
         parts["total"].backward()
         nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -610,7 +522,7 @@ def train(args: argparse.Namespace) -> None:
             tb.add_scalar("train/lr", lr, step)
             tb.add_scalar("train/iterations_per_s", rate, step)
         if step % args.val_every == 0 or step == stop_at:
-            val = validate(model, losses, val_batches, critic)
+            val = validate(model, losses, val_batches)
             if tb:
                 for k, v in val.items():
                     tb.add_scalar(f"val/{k}", v, step)
@@ -618,10 +530,9 @@ def train(args: argparse.Namespace) -> None:
             if best is None or val["pos"] < best["pos"]:
                 best = {**val, "step": step}
         if step % args.save_every == 0 or step == stop_at:
-            save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best,
-                            critic)  # fmt: skip
+            save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best)
     bar.close()
-    save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best, critic)
+    save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best)
     elapsed = time.time() - started
     print(
         f"{step - first_step} steps in {elapsed:.0f} s "

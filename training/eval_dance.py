@@ -21,9 +21,10 @@ a beat). Parts:
   alignment against the same tracker's beats, and the warp's share (no warp);
 - **ten minutes**: the held-out songs' music looped to 10 minutes, one generation per seed:
   stalls, mean joint speed per 30 s;
-- **genre**: a classifier of dance motion (``training.eval_style.ClipClassifier``) trained
-  on the real dances of the training songs names the genre of dances generated for the
-  held-out songs with each of the four genres requested;
+- **genre**: a classifier of dance motion (``training.eval_style.ClipClassifier`` on
+  :func:`genre_features`, relative to the hips' floor point) trained on the real dances of
+  the training songs names the genre of dances generated for the held-out songs with each
+  of the four genres requested;
 - **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) of those dances and
   of the real held-out dances.
 
@@ -190,14 +191,34 @@ def held_out_songs():
     return held, train
 
 
+def floor_rooted(motion: Motion) -> Motion:
+    """The same motion with its root joint following the hips on the floor. Canonical dances
+    keep ``joint_Root`` at the origin, so ``eval_style.window_features`` (positions relative
+    to the root) would describe where on the floor the dancer has wandered; relative to the
+    hips' floor point they describe the dance."""
+    lpos = motion.lpos.copy()
+    floor = lpos[:, DF.HIPS] * np.array([1.0, 0.0, 1.0])
+    lpos[:, 0] += floor
+    lpos[:, DF.HIPS] -= floor
+    return motion.replace(lpos=lpos)
+
+
+def genre_features(motion: Motion) -> np.ndarray:
+    """Window statistics of a dance for the genre classifier (``window_features`` of
+    :func:`floor_rooted`)."""
+    from training.eval_style import window_features
+
+    return window_features(floor_rooted(motion))
+
+
 def held_out(engine, seeds: int, log=print) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats),
     genre recognition of every requested genre, foot sliding."""
     from service.metrics import StageTimer
-    from training.eval_style import ClipClassifier, window_features
+    from training.eval_style import ClipClassifier
 
     held, train = held_out_songs()
-    genre_clf = ClipClassifier([window_features(m) for _, m in train], [g for g, _ in train])
+    genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])
     rows = {k: [] for k in ("real", "generated", "generated_no_warp")}
     sliding = {"real": [], "generated": []}
     confusion = {g: {h: 0 for h in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
@@ -207,14 +228,14 @@ def held_out(engine, seeds: int, log=print) -> dict:
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         sliding["real"].append(CT.canonical_foot_sliding(real))
-        real_hits.append(genre_clf.predict(window_features(real)) == genre)
+        real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
         for seed in range(seeds):
             for asked in DF.MUSIC_GENRES:
                 out = engine.dance(samples, sr, StageTimer(engine.name), genre=asked,
                                    seed=seed).motion  # fmt: skip
-                named = genre_clf.predict(window_features(out))
+                named = genre_clf.predict(genre_features(out))
                 confusion[asked][named] += 1
                 sliding["generated"].append(CT.canonical_foot_sliding(out))
                 if asked != genre:
