@@ -574,6 +574,7 @@ LOCAL_TEMPO_SECONDS = 12.0
 """Span of the autocorrelation that sets the local tempo the beat tracker follows."""
 LOCAL_TEMPO_RANGE = 1.35
 """The local tempo stays within this factor of the song's tempo (its octave)."""
+_ACF_STRIDE = 2  # autocorrelations of every other frame's excerpt: 8-s windows overlap anyway
 
 
 @dataclass(frozen=True)
@@ -629,7 +630,7 @@ def tempo_curve(
     onset = np.asarray(onset, dtype=np.float64)
     if onset.size == 0 or not onset.any():
         return Tempo(0.0, np.zeros(0))
-    block = max(1, int(round(frame_rate)))
+    block = max(_ACF_STRIDE, _ACF_STRIDE * int(round(frame_rate / _ACF_STRIDE)))  # ~1 s
     sums = _block_autocorrelation(onset, int(window_seconds * frame_rate), block)
     mean_ac = sums.sum(axis=0) / len(onset)
     lags = np.arange(len(mean_ac), dtype=np.float64)
@@ -685,15 +686,16 @@ def _block_autocorrelation(onset: np.ndarray, window: int, block: int) -> np.nda
     n_fft = scipy.fft.next_fast_len(2 * window - 1)
     chunk = max(block, _CHUNK_FRAMES // block * block)
     out = np.zeros((-(-len(onset) // block), window))
+    stride = _ACF_STRIDE if block % _ACF_STRIDE == 0 else 1
     for lo in range(0, len(onset), chunk):
-        starts = np.arange(lo, min(lo + chunk, len(onset)))
+        starts = np.arange(lo, min(lo + chunk, len(onset)), stride)
         excerpts = padded[starts[:, None] + np.arange(window)[None, :]] * taper
         spectrum = scipy.fft.rfft(excerpts, n=n_fft, axis=1)
         ac = scipy.fft.irfft(spectrum.real**2 + spectrum.imag**2, n=n_fft, axis=1)[:, :window]
         peak = np.abs(ac).max(axis=1, keepdims=True)
         ac /= np.where(peak > 1e-30, peak, 1.0)
-        out[lo // block : lo // block + -(-len(starts) // block)] += np.add.reduceat(
-            ac, np.arange(0, len(starts), block), axis=0
+        out[lo // block : lo // block + -(-len(starts) * stride // block)] += stride * (
+            np.add.reduceat(ac, np.arange(0, len(starts), block // stride), axis=0)
         )
     return out
 

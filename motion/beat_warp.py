@@ -169,7 +169,7 @@ def shifted_grid_baseline(
     return Baseline(float(np.mean(scores)), float(np.std(scores)), draws)
 
 
-def alignment(motion: Motion, music_beats: np.ndarray, *, draws: int = 200) -> tuple[float, float]:
+def alignment(motion: Motion, music_beats: np.ndarray, *, draws: int = 50) -> tuple[float, float]:
     """The project's beat alignment of ``motion`` against ``music_beats (B,)`` (seconds from
     its frame 0): the AIST++ score of its kinematic beats and its chance level, the mean
     over ``draws`` shifted grids (:func:`shifted_grid_baseline`, seed 0). ``(0, 0)`` with

@@ -101,11 +101,15 @@ def neutral_genre() -> np.ndarray:
     return genre_vector(probabilities=np.full(len(MUSIC_GENRES), 1.0 / len(MUSIC_GENRES)))
 
 
-def guided_pose(given: np.ndarray, neutral: np.ndarray) -> np.ndarray:
+def guided_pose(given: np.ndarray, neutral: np.ndarray, out: np.ndarray | None = None):
     """The pose generation keeps and feeds back (classifier-free guidance, Ho and Salimans
     2022, on the network's output): the step's pose for the :func:`neutral_genre` moved
-    :data:`GENRE_GUIDANCE` times as far as the requested genre moves it."""
-    return neutral + GENRE_GUIDANCE * (given - neutral)
+    :data:`GENRE_GUIDANCE` times as far as the requested genre moves it (into ``out``
+    when given: the rollout calls this once a frame)."""
+    out = np.subtract(given, neutral, out=out)
+    out *= GENRE_GUIDANCE
+    out += neutral
+    return out
 
 
 # --------------------------------------------------------------------------- audio
@@ -343,10 +347,9 @@ this share of its median (what a viewer notices as the dancer stopping)."""
 KEEP_MOVING_SECONDS = 2.0
 KEEP_MOVING_TRIGGER = 0.4
 KEEP_MOVING_FRACTION = 0.6
-KEEP_MOVING_MAX_GAIN = 4.0
-KEEP_MOVING_SMOOTH_SECONDS = 1.0
+KEEP_MOVING_MARGIN_SECONDS = 0.5
+KEEP_MOVING_REACH_SECONDS = 30.0
 KEEP_MOVING_STRIDE = 2
-KEEP_MOVING_OVERSHOOT = 1.3
 
 
 def window_means(x: np.ndarray, length: int) -> np.ndarray:
@@ -381,46 +384,64 @@ def stalls(speed: np.ndarray, fps: float, playing: np.ndarray | None = None) -> 
 def keep_moving(
     features: np.ndarray, playing: np.ndarray | None = None, fps: float = FPS
 ) -> tuple[np.ndarray, Motion]:
-    """Raw features ``(F, MOTION_CHANNELS)`` of a dance whose slow stretches are livened up,
-    and the motion they decode to (:func:`decode`).
+    """Raw features ``(F, MOTION_CHANNELS)`` of a dance whose slow stretches are filled with
+    its own livelier moves, and the motion they decode to (:func:`decode`).
 
-    When the mean joint speed over :data:`KEEP_MOVING_SECONDS` falls below
-    :data:`KEEP_MOVING_TRIGGER` of the dance's median somewhere while the music plays, then
-    wherever it is below :data:`KEEP_MOVING_FRACTION` of the median (``playing
-    (F,)`` bool, default everywhere), the motion's departures from its own Gaussian-smoothed
-    course (:data:`KEEP_MOVING_SMOOTH_SECONDS`: rotations as 6D, hips height, floor velocity
-    and turning) are amplified by the missing factor, at most :data:`KEEP_MOVING_MAX_GAIN`,
-    the gain itself smoothed over a second. The network's autoregressive loop can settle
-    into a near standstill on quiet music, which a viewer sees as the dancer stopping; this
-    keeps the steps it was making, only larger."""
-    from scipy.ndimage import gaussian_filter1d
-
+    The network's autoregressive loop can settle into a near standstill (5 cm/s against a
+    median of 30), which a viewer sees as the dancer stopping, and no gain on so little
+    motion brings it back. Where the mean joint speed over :data:`KEEP_MOVING_SECONDS`
+    falls below :data:`KEEP_MOVING_TRIGGER` of the dance's median while the music plays
+    (``playing (F,)`` bool, default everywhere), the stretch below
+    :data:`KEEP_MOVING_FRACTION` of it around that place (with
+    :data:`KEEP_MOVING_MARGIN_SECONDS` either side) is cross-faded, over the margins, into
+    the equally long stretch within :data:`KEEP_MOVING_REACH_SECONDS` that moves most
+    steadily (highest slowest window). Features are root-relative (velocities, facing
+    frame), so a copied stretch joins on; the beat warp afterwards puts it on the beat."""
     x = np.asarray(features, dtype=np.float32).copy()
     playing = np.ones(len(x), bool) if playing is None else np.asarray(playing, bool)
     motion, _ = decode(x, fps=fps)
-    if len(x) < 2 * KEEP_MOVING_STRIDE + 1 or not playing.any():
+    length = int(round(KEEP_MOVING_SECONDS * fps))
+    if len(x) < 4 * length or not playing.any():
         return x, motion
     # joint speed at every other frame: enough for means over seconds, at half the FK
     sampled = motion.replace(lrot=motion.lrot[::KEEP_MOVING_STRIDE],
                              lpos=motion.lpos[::KEEP_MOVING_STRIDE])  # fmt: skip
-    rate = fps / KEEP_MOVING_STRIDE
-    speed = np.repeat(BW.joint_speed(K.global_positions(sampled), rate), KEEP_MOVING_STRIDE)
+    speed = np.repeat(BW.joint_speed(K.global_positions(sampled), fps / KEEP_MOVING_STRIDE),
+                      KEEP_MOVING_STRIDE)  # fmt: skip
     speed = np.pad(speed, (0, max(0, len(x) - len(speed))), mode="edge")[: len(x)]
     median = float(np.median(speed[playing]))
-    local = window_means(speed, int(round(KEEP_MOVING_SECONDS * fps)))
-    if not (local[playing] < KEEP_MOVING_TRIGGER * median).any():
+    local = window_means(speed, length)
+    if not (playing & (local < KEEP_MOVING_TRIGGER * median)).any():
         return x, motion
-    gain = np.clip(KEEP_MOVING_FRACTION * median / np.maximum(local, 1e-9), 1.0,
-                   KEEP_MOVING_MAX_GAIN)  # fmt: skip
-    gain[~playing] = 1.0
-    gain = gaussian_filter1d(gain, fps, mode="nearest")
-    # each gain a little over the shortfall: amplified departures add less than their factor
-    gain = 1.0 + KEEP_MOVING_OVERSHOOT * (gain - 1.0)
-    channels = slice(0, CONTACTS.start)
-    smooth = gaussian_filter1d(x[:, channels], KEEP_MOVING_SMOOTH_SECONDS * fps, axis=0,
-                               mode="nearest")  # fmt: skip
-    x[:, channels] = smooth + gain[:, None] * (x[:, channels] - smooth)
+    margin = int(round(KEEP_MOVING_MARGIN_SECONDS * fps))
+    slow = _runs(playing & (local < KEEP_MOVING_FRACTION * median))
+    lively = np.ones(len(x), bool)
+    for a, b in slow:
+        lively[max(0, a - margin) : b + margin] = False
+    source = x.copy()
+    for a, b in slow:
+        if not (local[a:b] < KEEP_MOVING_TRIGGER * median).any():
+            continue
+        a, b = max(0, a - margin), min(len(x), b + margin)
+        best, best_floor = None, -1.0
+        reach = int(round(KEEP_MOVING_REACH_SECONDS * fps))
+        for start in range(max(0, a - reach), min(len(x) - (b - a), b + reach) + 1, margin):
+            span = slice(start, start + b - a)
+            if lively[span].all() and local[span].min() > best_floor:
+                best, best_floor = start, float(local[span].min())
+        if best is None:
+            continue
+        ramp = np.clip(np.minimum(np.arange(b - a) + 1, b - a - np.arange(b - a)) / margin, 0, 1)
+        weight = (ramp * ramp * (3.0 - 2.0 * ramp))[:, None]
+        x[a:b] = (1.0 - weight) * x[a:b] + weight * source[best : best + b - a]
     return x, decode(x, fps=fps)[0]
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of the runs of True in ``mask (N,)``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))  # fmt: skip
 
 
 GLIDE_CLEARANCE = 0.04

@@ -96,7 +96,7 @@ class DanceEngine(Engine):
             feeds["code"] = pair[t]
             np.add(out[t - 1], noise[t], out=feeds["prev"])  # both rows
             pose, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = session.run(None, feeds)
-            out[t] = DF.guided_pose(pose[0], pose[1])
+            DF.guided_pose(pose[0], pose[1], out=out[t])
         return out
 
     # --- the whole request ------------------------------------------------------------------

@@ -254,29 +254,29 @@ def test_stalls_are_slow_windows_of_music():
     assert len(DF.stalls(speed, fps)) == 0
 
 
-def test_keep_moving_livens_up_a_slow_stretch_only(walk):
-    """A walk (repeated to 20 s) slowed to a near standstill in its middle: the amplification brings that
-    stretch back above the stall line and leaves the rest as it was."""
+def test_keep_moving_fills_a_standstill_only(walk):
+    """A walk (repeated to 32 s) slowed to a near standstill for 6 s in its middle: that
+    stretch is filled with the walk's own steps, and the rest is left as it was."""
     from motion import beat_warp as BW
     from motion import kinematics as K
 
-    raw = np.tile(DF.encode(walk).features.astype(np.float64), (10, 1))  # 20 s
+    raw = np.tile(DF.encode(walk).features.astype(np.float64), (16, 1))  # 32 s
     frames = len(raw)
-    middle = slice(frames // 3, 2 * frames // 3)
+    middle = slice(frames // 2 - 90, frames // 2 + 90)
     course = raw[middle].mean(axis=0)
-    raw[middle, : DF.CONTACTS.start] = course[: DF.CONTACTS.start] + 0.1 * (
-        raw[middle, : DF.CONTACTS.start] - course[: DF.CONTACTS.start]
-    )
+    body = slice(0, DF.CONTACTS.start)
+    raw[middle, body] = course[body] + 0.1 * (raw[middle, body] - course[body])
     raw[middle, DF.VELOCITY] *= 0.1
     raw[middle, DF.TURN] *= 0.1
     before = BW.joint_speed(K.global_positions(DF.decode(raw)[0]), DF.FPS)
-    livened, motion = DF.keep_moving(raw.astype(np.float32))
+    _, motion = DF.keep_moving(raw.astype(np.float32))
     after = BW.joint_speed(K.global_positions(motion), DF.FPS)
-    inner = slice(frames // 3 + 30, 2 * frames // 3 - 30)
-    assert after[inner].mean() > 2.0 * before[inner].mean()
-    edge = slice(0, frames // 3 - 45)
-    np.testing.assert_allclose(after[edge], before[edge], rtol=0.05, atol=1.0)
-    silent = np.zeros(frames, bool)
+    inner = slice(middle.start + 15, middle.stop - 15)
+    assert after[inner].mean() > 3.0 * before[inner].mean()
+    assert not DF.stalls(after, DF.FPS).size and DF.stalls(before, DF.FPS).size
+    edge = slice(0, middle.start - 60)
+    np.testing.assert_allclose(after[edge], before[edge], rtol=1e-4, atol=1e-3)
+    silent = np.zeros(frames, bool)  # the music stopped: a standstill is no stall
     _, untouched = DF.keep_moving(raw.astype(np.float32), silent)
     np.testing.assert_allclose(BW.joint_speed(K.global_positions(untouched), DF.FPS), before,
                                rtol=1e-4, atol=1e-3)  # fmt: skip
