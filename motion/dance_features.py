@@ -88,30 +88,6 @@ def genre_vector(name: str | None = None, probabilities: np.ndarray | None = Non
     return out
 
 
-GENRE_GUIDANCE = 2.0
-"""How far generation is pushed towards the requested genre (:func:`guided_pose`). The
-network learnt to dance mostly from the music and used its genre input little: a classifier
-of real dances named the requested genre of 9 of 16 dances generated for the held-out songs
-(all four genres asked of each), and 13 of 16 with this guidance."""
-
-
-def neutral_genre() -> np.ndarray:
-    """The genre vector ``(len(GENRES),)`` of no genre in particular: the music genres'
-    average."""
-    return genre_vector(probabilities=np.full(len(MUSIC_GENRES), 1.0 / len(MUSIC_GENRES)))
-
-
-def guided_pose(given: np.ndarray, neutral: np.ndarray, out: np.ndarray | None = None):
-    """The pose generation keeps and feeds back (classifier-free guidance, Ho and Salimans
-    2022, on the network's output): the step's pose for the :func:`neutral_genre` moved
-    :data:`GENRE_GUIDANCE` times as far as the requested genre moves it (into ``out``
-    when given: the rollout calls this once a frame)."""
-    out = np.subtract(given, neutral, out=out)
-    out *= GENRE_GUIDANCE
-    out += neutral
-    return out
-
-
 # --------------------------------------------------------------------------- audio
 
 

@@ -4,10 +4,10 @@ A request's song goes: decoded samples -> per-frame features at 30 fps for its w
 length (``motion.audio``; beats tracked on the song itself) -> standardised -> ``audio``
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
-fed-back pose (guided towards the genre) -> raw features -> Butterworth low-pass -> stalls
-livened up -> canonical motion (root integrated) -> foot contacts pinned by IK -> time warp
-putting its kinematic beats on the song's pulses (``motion.beat_warp``) -> the requested
-frame rate. Routes retarget it when asked.
+fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
+motion (root integrated) -> foot contacts pinned by IK -> time warp putting its kinematic
+beats on the song's pulses (``motion.beat_warp``) -> the requested frame rate. Routes
+retarget it when asked.
 """
 
 from __future__ import annotations
@@ -78,25 +78,24 @@ class DanceEngine(Engine):
         self, code: np.ndarray, genre: np.ndarray, start: np.ndarray, seed: int
     ) -> np.ndarray:
         """Standardised poses ``(F, M)``: frame 0 is ``start``, each next one from the step
-        graph fed its own (seeded-noisy) output, guided towards ``genre``
-        (``DF.guided_pose``: the step runs for it and for the neutral genre at once)."""
+        graph fed its own (seeded-noisy) output."""
         rng = np.random.default_rng(seed)
         frames = len(code)
         out = np.empty((frames, DF.MOTION_CHANNELS), np.float32)
         out[0] = start
-        zeros = np.zeros((2, self.hidden), np.float32)
-        feeds = {"genre": np.stack([genre, DF.neutral_genre()]).astype(np.float32),
-                 "h1": zeros, "c1": zeros, "h2": zeros, "c2": zeros}  # fmt: skip
-        pair = np.repeat(code[:, None], 2, axis=1)
+        zeros = np.zeros((1, self.hidden), np.float32)
+        feeds = {"genre": genre[None].astype(np.float32), "h1": zeros, "c1": zeros,
+                 "h2": zeros, "c2": zeros}  # fmt: skip
+        prev = start[None].astype(np.float32)
         noise = (NOISE * rng.standard_normal((frames, DF.MOTION_CHANNELS))).astype(np.float32)
         noise[:, DF.CONTACTS] = 0.0
-        feeds["prev"] = np.empty((2, DF.MOTION_CHANNELS), np.float32)
         session = self.sessions["step"]
         for t in range(1, frames):
-            feeds["code"] = pair[t]
-            np.add(out[t - 1], noise[t], out=feeds["prev"])  # both rows
+            feeds["code"] = code[t : t + 1]
+            feeds["prev"] = prev + noise[t]
             pose, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = session.run(None, feeds)
-            DF.guided_pose(pose[0], pose[1], out=out[t])
+            out[t] = pose[0]
+            prev = pose
         return out
 
     # --- the whole request ------------------------------------------------------------------
