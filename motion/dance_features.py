@@ -222,13 +222,24 @@ def decode(
     body = rot.from_6d(x[:, ROTATIONS].reshape(frames, len(BODY), 6))
     lrot[:, BODY] = body
     lrot[:, HIPS] = rot.mul(face, body[:, 0])
-    lrot = rot.make_continuous(lrot)
+    lrot = _continuous(lrot)
     lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
     lpos[:, 0] = 0.0
     lpos[:, HIPS] = root + np.stack(
         [np.zeros(frames), x[:, HEIGHT] * LEG, np.zeros(frames)], axis=-1
     )
     return Motion(C.SKELETON, float(fps), lrot, lpos), x[:, CONTACTS] > 0.5
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """``rot.make_continuous`` along frames, without its loop over frames: each quaternion's
+    sign is the running product of the signs of the dot products with its predecessor (the
+    same flips, but where a dot product is exactly 0)."""
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    signs = np.cumprod(np.where(dots < 0.0, -1.0, 1.0), axis=0)
+    out = q.copy()
+    out[1:] *= signs[..., None]
+    return out
 
 
 # --------------------------------------------------------------------------- statistics
