@@ -332,10 +332,10 @@ STALL_FRACTION = 0.3
 """A stall: :data:`STALL_SECONDS` of music in which the dance's mean joint speed stays below
 this share of its median (what a viewer notices as the dancer stopping)."""
 KEEP_MOVING_SECONDS = 2.0
-KEEP_MOVING_TRIGGER = 0.4
-KEEP_MOVING_FRACTION = 0.6
+KEEP_MOVING_TRIGGER = 0.5
+KEEP_MOVING_FRACTION = 0.65
 KEEP_MOVING_MARGIN_SECONDS = 0.5
-KEEP_MOVING_REACH_SECONDS = 30.0
+KEEP_MOVING_PIECE_SECONDS = 3.0
 KEEP_MOVING_STRIDE = 2
 
 
@@ -380,10 +380,11 @@ def keep_moving(
     falls below :data:`KEEP_MOVING_TRIGGER` of the dance's median while the music plays
     (``playing (F,)`` bool, default everywhere), the stretch below
     :data:`KEEP_MOVING_FRACTION` of it around that place (with
-    :data:`KEEP_MOVING_MARGIN_SECONDS` either side) is cross-faded, over the margins, into
-    the equally long stretch within :data:`KEEP_MOVING_REACH_SECONDS` that moves most
-    steadily (highest slowest window). Features are root-relative (velocities, facing
-    frame), so a copied stretch joins on; the beat warp afterwards puts it on the beat."""
+    :data:`KEEP_MOVING_MARGIN_SECONDS` either side) is cross-faded, over the margins and
+    in pieces of :data:`KEEP_MOVING_PIECE_SECONDS`, into the equally long stretch of the
+    dance that moves most steadily (highest slowest window) away from any slow stretch.
+    Features are root-relative (velocities, facing frame), so a copied stretch joins on;
+    the beat warp afterwards puts it on the beat."""
     x = np.asarray(features, dtype=np.float32).copy()
     playing = np.ones(len(x), bool) if playing is None else np.asarray(playing, bool)
     motion, _ = decode(x, fps=fps)
@@ -401,6 +402,7 @@ def keep_moving(
     if not (playing & (local < KEEP_MOVING_TRIGGER * median)).any():
         return x, motion
     margin = int(round(KEEP_MOVING_MARGIN_SECONDS * fps))
+    piece = int(round(KEEP_MOVING_PIECE_SECONDS * fps))
     slow = _runs(playing & (local < KEEP_MOVING_FRACTION * median))
     lively = np.ones(len(x), bool)
     for a, b in slow:
@@ -409,18 +411,20 @@ def keep_moving(
     for a, b in slow:
         if not (local[a:b] < KEEP_MOVING_TRIGGER * median).any():
             continue
-        a, b = max(0, a - margin), min(len(x), b + margin)
-        best, best_floor = None, -1.0
-        reach = int(round(KEEP_MOVING_REACH_SECONDS * fps))
-        for start in range(max(0, a - reach), min(len(x) - (b - a), b + reach) + 1, margin):
-            span = slice(start, start + b - a)
-            if lively[span].all() and local[span].min() > best_floor:
-                best, best_floor = start, float(local[span].min())
-        if best is None:
-            continue
-        ramp = np.clip(np.minimum(np.arange(b - a) + 1, b - a - np.arange(b - a)) / margin, 0, 1)
-        weight = (ramp * ramp * (3.0 - 2.0 * ramp))[:, None]
-        x[a:b] = (1.0 - weight) * x[a:b] + weight * source[best : best + b - a]
+        # pieces of at most KEEP_MOVING_PIECE_SECONDS, each cross-faded into the next
+        for p in range(a, b, piece):
+            lo, hi = max(0, p - margin), min(len(x), min(p + piece, b) + margin)
+            best, best_floor = None, -1.0
+            for start in range(0, len(x) - (hi - lo) + 1, margin):
+                span = slice(start, start + hi - lo)
+                if lively[span].all() and local[span].min() > best_floor:
+                    best, best_floor = start, float(local[span].min())
+            if best is None:
+                continue
+            n = hi - lo
+            ramp = np.clip(np.minimum(np.arange(n) + 1, n - np.arange(n)) / margin, 0.0, 1.0)
+            weight = (ramp * ramp * (3.0 - 2.0 * ramp))[:, None]
+            x[lo:hi] = (1.0 - weight) * x[lo:hi] + weight * source[best : best + n]
     return x, decode(x, fps=fps)[0]
 
 
