@@ -80,8 +80,9 @@ bench-fast: $(VENV)/.dev
 
 # Dance (jacob2019 made to work): the alignment study writes training/dance_alignment.json;
 # training resumes from checkpoints/dance.pt when it exists (TensorBoard in runs/dance/).
-# Extra flags: DANCE_ARGS="--max-steps 100 --minutes 60". eval-dance: held-out songs' beat
-# alignment (raw and beat-warped) vs real dances and chance, 10-minute energy, genre accuracy.
+# Extra flags: DANCE_ARGS="--max-steps 100 --minutes 60". eval-dance: the generated beat test
+# set (tracker F-measure, alignment to known beats vs shifted grids), every shared song, the
+# held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding.
 DANCE_ARGS ?=
 .PHONY: dance-alignment train-dance export-dance eval-dance
 dance-alignment: $(VENV)/.dev

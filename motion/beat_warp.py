@@ -38,6 +38,12 @@ from motion.skeleton import Motion
 
 SIGMA_SECONDS = 0.05
 SMOOTH_SECONDS = 1.0 / 12.0
+WARP_MAX_STRETCH = 1.35
+"""Playback rate :func:`warp_to_beats` allows between anchors: within ``[1 / s, s]``."""
+WARP_ITERATIONS = 8
+WARP_MAX_SHARE = 0.5
+"""A kinematic beat is moved onto a music beat up to this share of the beat period away (and
+``max_shift`` seconds): at half, any kinematic beat may go to its nearest beat."""
 
 
 def joint_speed(gpos: np.ndarray, fps: float) -> np.ndarray:
@@ -163,6 +169,18 @@ def shifted_grid_baseline(
     return Baseline(float(np.mean(scores)), float(np.std(scores)), draws)
 
 
+def alignment(motion: Motion, music_beats: np.ndarray, *, draws: int = 50) -> tuple[float, float]:
+    """The project's beat alignment of ``motion`` against ``music_beats (B,)`` (seconds from
+    its frame 0): the AIST++ score of its kinematic beats and its chance level, the mean
+    over ``draws`` shifted grids (:func:`shifted_grid_baseline`, seed 0). ``(0, 0)`` with
+    under three beats. The service's warning and ``make eval-dance`` both report this."""
+    if np.asarray(music_beats).size < 3:
+        return 0.0, 0.0
+    kin = kinematic_beats(K.global_positions(motion), motion.fps)
+    chance = shifted_grid_baseline(kin, music_beats, draws=draws).mean
+    return beat_alignment_score(kin, music_beats), chance
+
+
 def beat_position(beats: np.ndarray, times: np.ndarray) -> np.ndarray:
     """Continuous beat index ``(N,)`` at ``times (N,)``: ``k`` at beat ``k``, linear between
     beats, extrapolated with the median period outside them."""
@@ -195,11 +213,12 @@ def match_beats(
     *,
     max_shift: float = 0.2,
     max_stretch: float = 1.25,
+    max_share: float = WARP_MAX_SHARE,
 ) -> np.ndarray:
     """Monotone anchor pairs ``(A, 2)`` (music beat, kinematic beat) in seconds.
 
     Each kinematic beat is paired with its nearest music beat when they are within
-    ``max_shift`` seconds (and a third of the local beat period); a music beat takes at most
+    ``max_shift`` seconds (and ``max_share`` of the local beat period); a music beat takes at most
     one kinematic beat (the nearest); pairs whose time map between neighbours would need a
     playback rate outside ``[1 / max_stretch, max_stretch]`` are dropped, greedily in time.
     """
@@ -211,7 +230,7 @@ def match_beats(
     nearest = np.where(np.abs(kin - music[j - 1]) <= np.abs(kin - music[j]), j - 1, j)
     period = np.interp(kin, music[1:], np.diff(music))
     dist = np.abs(kin - music[nearest])
-    ok = (dist <= max_shift) & (dist <= period / 3.0)
+    ok = (dist <= max_shift) & (dist <= period * max_share)
     best: dict[int, tuple[float, float]] = {}
     for k, m, d in zip(kin[ok], nearest[ok], dist[ok], strict=True):
         if int(m) not in best or d < abs(best[int(m)][1] - music[m]):
@@ -233,34 +252,56 @@ def warp_to_beats(
     *,
     kin_beats: np.ndarray | None = None,
     max_shift: float = 0.2,
-    max_stretch: float = 1.2,
-    iterations: int = 3,
+    max_stretch: float = WARP_MAX_STRETCH,
+    iterations: int = WARP_ITERATIONS,
+    max_share: float = WARP_MAX_SHARE,
 ) -> WarpResult:
     """``motion`` retimed so that its kinematic beats near music beats fall on them.
 
     Music beat times are seconds from the motion's frame 0. The output has the same frame
     count and rate; output frame ``i`` shows the source pose at ``s(i / fps)``, ``s`` a
-    monotone cubic (PCHIP, so the playback rate changes smoothly) through the anchors of
-    :func:`match_beats`, continued with slope 1 before the first and after the last. A warp
-    changes the speed profile a little, so minima move a little: the warp is repeated
-    ``iterations`` times on its own result (kinematic beats found afresh each time; the
-    first time ``kin_beats`` when given). ``anchors`` are those of the first pass.
+    monotone map composed of ``iterations`` passes, each a cubic (PCHIP, so the playback
+    rate changes smoothly) through the anchors of :func:`match_beats`, continued with slope
+    1 before the first and after the last. A warp moves the speed minima a little, so each
+    pass finds the kinematic beats afresh (the first time ``kin_beats`` when given) on the
+    speed of the motion warped so far, ``v(s(t)) s'(t)``: the source's joint speed through
+    the map, so the motion itself is resampled once. ``anchors`` are those of the first
+    pass.
     """
     from scipy.interpolate import PchipInterpolator
 
-    first = None
-    out = motion
+    fps = float(motion.fps)
+    frames = motion.num_frames
+    speed = joint_speed(K.global_positions(motion), fps)
+    if frames < 3:
+        return WarpResult(motion, np.zeros((0, 2)))
+    mids = (np.arange(frames - 1) + 0.5) / fps
+    out_t = np.arange(frames) / fps
+    src_t = out_t.copy()  # the composed map, sampled at the output frames
+    first, moved = None, False
     for i in range(max(1, iterations)):
         kin = kin_beats if (i == 0 and kin_beats is not None) else None
         if kin is None:
-            kin = kinematic_beats(K.global_positions(out), out.fps)
-        anchors = match_beats(kin, music_beats, max_shift=max_shift, max_stretch=max_stretch)
+            at = np.interp(mids, out_t, src_t)
+            rate = np.diff(src_t) * fps
+            kin = speed_minima(np.interp(at, mids, speed) * rate, fps)
+        anchors = match_beats(kin, music_beats, max_shift=max_shift, max_stretch=max_stretch,
+                              max_share=max_share)  # fmt: skip
         first = anchors if first is None else first
         if len(anchors) < 2:
             break
-        out_t = np.arange(out.num_frames) / out.fps
         knots_out = np.concatenate([[anchors[0, 0] - 1e3], anchors[:, 0], [anchors[-1, 0] + 1e3]])
         knots_src = np.concatenate([[anchors[0, 1] - 1e3], anchors[:, 1], [anchors[-1, 1] + 1e3]])
-        src_t = PchipInterpolator(knots_out, knots_src)(out_t)
-        out = K.resample_at(out, src_t * out.fps, out.fps)
-    return WarpResult(out, first if first is not None else np.zeros((0, 2)))
+        step = PchipInterpolator(knots_out, knots_src)(out_t)
+        src_t = _through(src_t, out_t, step)
+        moved = True
+    warped = K.resample_at(motion, src_t * fps, fps) if moved else motion
+    return WarpResult(warped, first if first is not None else np.zeros((0, 2)))
+
+
+def _through(mapped: np.ndarray, times: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """A map sampled as ``mapped (N,)`` at ``times (N,)`` evaluated at ``query``: linear
+    between samples, slope 1 beyond them (as every pass's map is beyond its anchors)."""
+    out = np.interp(query, times, mapped)
+    out = np.where(query < times[0], mapped[0] + (query - times[0]), out)
+    return np.where(query > times[-1], mapped[-1] + (query - times[-1]), out)

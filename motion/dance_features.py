@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from motion import audio
+from motion import beat_warp as BW
 from motion import canonical as C
 from motion import contacts as CT
 from motion import kinematics as K
@@ -221,13 +222,24 @@ def decode(
     body = rot.from_6d(x[:, ROTATIONS].reshape(frames, len(BODY), 6))
     lrot[:, BODY] = body
     lrot[:, HIPS] = rot.mul(face, body[:, 0])
-    lrot = rot.make_continuous(lrot)
+    lrot = _continuous(lrot)
     lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
     lpos[:, 0] = 0.0
     lpos[:, HIPS] = root + np.stack(
         [np.zeros(frames), x[:, HEIGHT] * LEG, np.zeros(frames)], axis=-1
     )
     return Motion(C.SKELETON, float(fps), lrot, lpos), x[:, CONTACTS] > 0.5
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """``rot.make_continuous`` along frames, without its loop over frames: each quaternion's
+    sign is the running product of the signs of the dot products with its predecessor (the
+    same flips, but where a dot product is exactly 0)."""
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    signs = np.cumprod(np.where(dots < 0.0, -1.0, 1.0), axis=0)
+    out = q.copy()
+    out[1:] *= signs[..., None]
+    return out
 
 
 # --------------------------------------------------------------------------- statistics
@@ -313,3 +325,182 @@ def smooth_features(x: np.ndarray, cutoff_hz: float = 6.0, order: int = 2) -> np
     out = x.copy()
     out[:, : CONTACTS.start] = filtfilt(b, a, x[:, : CONTACTS.start], axis=0)
     return out.astype(np.float32)
+
+
+STALL_SECONDS = 5.0
+STALL_FRACTION = 0.3
+"""A stall: :data:`STALL_SECONDS` of music in which the dance's mean joint speed stays below
+this share of its median (what a viewer notices as the dancer stopping)."""
+KEEP_MOVING_SECONDS = 2.0
+KEEP_MOVING_TRIGGER = 0.5
+KEEP_MOVING_FRACTION = 0.65
+KEEP_MOVING_MARGIN_SECONDS = 0.5
+KEEP_MOVING_PIECE_SECONDS = 3.0
+KEEP_MOVING_STRIDE = 2
+
+
+def window_means(x: np.ndarray, length: int) -> np.ndarray:
+    """Mean of ``x (N,)`` over the ``length`` samples centred on each sample (edges: the
+    window shrinks)."""
+    from scipy.ndimage import uniform_filter1d
+
+    x = np.asarray(x, dtype=np.float64)
+    if x.size == 0:
+        return x
+    return uniform_filter1d(x, max(1, min(length, x.size)), mode="nearest")
+
+
+def stalls(speed: np.ndarray, fps: float, playing: np.ndarray | None = None) -> np.ndarray:
+    """Start times ``(S,)`` (seconds) of the :data:`STALL_SECONDS` windows of joint ``speed
+    (N,)`` (``motion.beat_warp.joint_speed``) whose mean is below :data:`STALL_FRACTION` of
+    the median speed, among windows in which the music plays throughout (``playing (N,)``
+    bool, default: everywhere)."""
+    speed = np.asarray(speed, dtype=np.float64)
+    length = int(round(STALL_SECONDS * fps))
+    if speed.size < length or speed.size == 0:
+        return np.zeros(0)
+    playing = np.ones(speed.size, bool) if playing is None else np.asarray(playing, bool)
+    median = float(np.median(speed[playing])) if playing.any() else 0.0
+    sums = np.concatenate([[0.0], np.cumsum(speed)])
+    means = (sums[length:] - sums[:-length]) / length
+    silent = np.concatenate([[0], np.cumsum(~playing)])
+    music = (silent[length:] - silent[:-length]) == 0
+    return np.flatnonzero(music & (means < STALL_FRACTION * median)) / float(fps)
+
+
+def keep_moving(
+    features: np.ndarray, playing: np.ndarray | None = None, fps: float = FPS
+) -> tuple[np.ndarray, Motion]:
+    """Raw features ``(F, MOTION_CHANNELS)`` of a dance whose slow stretches are filled with
+    its own livelier moves, and the motion they decode to (:func:`decode`).
+
+    The network's autoregressive loop can settle into a near standstill (5 cm/s against a
+    median of 30), which a viewer sees as the dancer stopping, and no gain on so little
+    motion brings it back. Where the mean joint speed over :data:`KEEP_MOVING_SECONDS`
+    falls below :data:`KEEP_MOVING_TRIGGER` of the dance's median while the music plays
+    (``playing (F,)`` bool, default everywhere), the stretch below
+    :data:`KEEP_MOVING_FRACTION` of it around that place (with
+    :data:`KEEP_MOVING_MARGIN_SECONDS` either side) is cross-faded, over the margins and
+    in pieces of :data:`KEEP_MOVING_PIECE_SECONDS`, into the equally long stretch of the
+    dance that moves most steadily (highest slowest window) away from any slow stretch.
+    Features are root-relative (velocities, facing frame), so a copied stretch joins on;
+    the beat warp afterwards puts it on the beat."""
+    x = np.asarray(features, dtype=np.float32).copy()
+    playing = np.ones(len(x), bool) if playing is None else np.asarray(playing, bool)
+    motion, _ = decode(x, fps=fps)
+    length = int(round(KEEP_MOVING_SECONDS * fps))
+    if len(x) < 4 * length or not playing.any():
+        return x, motion
+    # joint speed at every other frame: enough for means over seconds, at half the FK
+    sampled = motion.replace(lrot=motion.lrot[::KEEP_MOVING_STRIDE],
+                             lpos=motion.lpos[::KEEP_MOVING_STRIDE])  # fmt: skip
+    speed = np.repeat(BW.joint_speed(K.global_positions(sampled), fps / KEEP_MOVING_STRIDE),
+                      KEEP_MOVING_STRIDE)  # fmt: skip
+    speed = np.pad(speed, (0, max(0, len(x) - len(speed))), mode="edge")[: len(x)]
+    median = float(np.median(speed[playing]))
+    local = window_means(speed, length)
+    if not (playing & (local < KEEP_MOVING_TRIGGER * median)).any():
+        return x, motion
+    margin = int(round(KEEP_MOVING_MARGIN_SECONDS * fps))
+    piece = int(round(KEEP_MOVING_PIECE_SECONDS * fps))
+    slow = _runs(playing & (local < KEEP_MOVING_FRACTION * median))
+    lively = np.ones(len(x), bool)
+    for a, b in slow:
+        lively[max(0, a - margin) : b + margin] = False
+    source = x.copy()
+    for a, b in slow:
+        if not (local[a:b] < KEEP_MOVING_TRIGGER * median).any():
+            continue
+        # pieces of at most KEEP_MOVING_PIECE_SECONDS, each cross-faded into the next
+        for p in range(a, b, piece):
+            lo, hi = max(0, p - margin), min(len(x), min(p + piece, b) + margin)
+            best, best_floor = None, -1.0
+            for start in range(0, len(x) - (hi - lo) + 1, margin):
+                span = slice(start, start + hi - lo)
+                if lively[span].all() and local[span].min() > best_floor:
+                    best, best_floor = start, float(local[span].min())
+            if best is None:
+                continue
+            n = hi - lo
+            ramp = np.clip(np.minimum(np.arange(n) + 1, n - np.arange(n)) / margin, 0.0, 1.0)
+            weight = (ramp * ramp * (3.0 - 2.0 * ramp))[:, None]
+            x[lo:hi] = (1.0 - weight) * x[lo:hi] + weight * source[best : best + n]
+    return x, decode(x, fps=fps)[0]
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of the runs of True in ``mask (N,)``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(),
+                    strict=True))  # fmt: skip
+
+
+GLIDE_CLEARANCE = 0.04
+"""Leg lengths (3.5 cm) a foot moving along the floor is lifted to (:func:`lift_gliding_feet`)."""
+GLIDE_SPEEDS = (0.3, 0.6)
+"""Horizontal foot speeds (leg lengths per second) over which the lift ramps in: at the first
+a foot counts as planted (:data:`CONTACT_SPEED`), at the second it is stepping."""
+GLIDE_SMOOTH_SECONDS = 0.1
+GLIDE_MAX_SHARE = 0.4
+"""A foot that glides for more of the dance than this is left as it is: lifted, it would
+hover, its floor rising with it."""
+
+
+def clean_feet(motion: Motion) -> Motion:
+    """The dance's foot clean-up: contacts (:func:`dance_contacts`) pinned by leg IK
+    (``ik.pin_canonical_feet``), then feet gliding along the floor lifted
+    (:func:`lift_gliding_feet`)."""
+    from motion import ik
+
+    contacts = dance_contacts(K.global_positions(motion), motion.fps)
+    return lift_gliding_feet(ik.pin_canonical_feet(motion, contacts))
+
+
+def lift_gliding_feet(motion: Motion) -> Motion:
+    """A canonical motion whose feet, where they move along the floor faster than a planted
+    foot, are lifted by leg IK to at least :data:`GLIDE_CLEARANCE` above their ground level
+    (``contacts.ground_heights``): a step in the air instead of a skate.
+
+    The network's feet often travel with the body while touching the floor (at 90-130 cm/s
+    on the held-out songs); pinning cannot hold a foot that is not still, and that skating
+    was almost all the foot sliding measured. The lift ramps in over :data:`GLIDE_SPEEDS`
+    and is smoothed over :data:`GLIDE_SMOOTH_SECONDS`; hip and knee rotations change, the
+    foot keeps its global rotation (so the toes rise with it)."""
+    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+    from motion import ik
+
+    parents = motion.skeleton.parents
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    lrot = motion.lrot.copy()
+    levels = dict(zip(FOOT_JOINTS, CT.ground_heights(gpos, FOOT_JOINTS, LEG), strict=True))
+    slow, fast = (s * LEG for s in GLIDE_SPEEDS)
+    smooth = max(GLIDE_SMOOTH_SECONDS * motion.fps, 1e-3)
+    for hip, knee, ankle, toe in ik.CANONICAL_LEGS:
+        speed = np.maximum(CT.horizontal_speed(gpos[:, ankle], motion.fps),
+                           CT.horizontal_speed(gpos[:, toe], motion.fps))  # fmt: skip
+        ramp = np.clip((speed - slow) / (fast - slow), 0.0, 1.0)
+        want = GLIDE_CLEARANCE * LEG * ramp * ramp * (3.0 - 2.0 * ramp)
+        low = np.minimum(gpos[:, ankle, 1] - levels[ankle], gpos[:, toe, 1] - levels[toe])
+        lift = np.maximum(want - low, 0.0)
+        window = max(1, int(round(2 * smooth)) | 1)
+        lift = gaussian_filter1d(maximum_filter1d(lift, window), smooth, mode="nearest")
+        f = np.flatnonzero(lift > 1e-3)
+        if f.size == 0 or f.size > GLIDE_MAX_SHARE * len(lift):
+            continue
+        toward_toes = gpos[f, toe] - gpos[f, ankle]
+        toward_toes[:, 1] = 0.0
+        target = gpos[f, ankle] + np.outer(lift[f], [0.0, 1.0, 0.0])
+        leg = ik.two_bone_ik(gpos[f, hip], gpos[f, knee], gpos[f, ankle], target, toward_toes)
+        thigh = rot.mul(leg.hip_turn, grot[f, hip])
+        shin = rot.mul(rot.mul(leg.knee_turn, leg.hip_turn), grot[f, knee])
+        for joint, parent_rot, new in (
+            (hip, grot[f, int(parents[hip])], thigh),
+            (knee, thigh, shin),
+            (ankle, shin, grot[f, ankle]),
+        ):
+            local = rot.mul(rot.inv(parent_rot), new)
+            lrot[f, joint] = np.where(
+                np.sum(local * lrot[f, joint], axis=-1, keepdims=True) < 0, -local, local
+            )
+    return motion.replace(lrot=lrot)

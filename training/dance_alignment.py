@@ -117,7 +117,7 @@ def _music_cache(folder: Path) -> Path:
     from training.data import cache_dir
 
     st = (folder / "audio.mp3").stat()
-    key = hashlib.sha256(f"{folder.name}:{st.st_size}:{int(st.st_mtime)}:1".encode()).hexdigest()
+    key = hashlib.sha256(f"{folder.name}:{st.st_size}:{int(st.st_mtime)}:2".encode()).hexdigest()
     return cache_dir() / f"dance_music_{folder.name}_{key[:12]}.npz"
 
 
@@ -129,7 +129,11 @@ def analyse_music(folder: Path) -> dict[str, np.ndarray]:
             return {k: z[k] for k in z.files}
     samples, sr = audio.decode(folder / "audio.mp3")
     onset = audio.onset_strength(samples, sr, aggregate=np.mean)
-    tempo, beats = audio.track_beats(audio.onset_strength(samples, sr, aggregate=np.median))
+    # the study's tracker, librosa's (median rise of dB, one tempo up to 320 bpm): the table
+    # and the training's beat phase were made with it; the service tracks beats on the
+    # kick and bass (audio.beat_onset_strength)
+    median = audio.onset_strength(samples, sr, aggregate=np.median)
+    tempo, beats = audio.track_beats(median, bpm=audio.estimate_tempo(median, max_bpm=320.0))
     out = {
         "beats": beats,
         "tempo": np.array(tempo),

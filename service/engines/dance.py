@@ -4,9 +4,10 @@ A request's song goes: decoded samples -> per-frame features at 30 fps for its w
 length (``motion.audio``; beats tracked on the song itself) -> standardised -> ``audio``
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
-fed-back pose -> raw features -> Butterworth low-pass -> canonical motion (root integrated)
--> time warp putting its kinematic beats on the song's beats (``motion.beat_warp``) -> foot
-contacts pinned by IK -> the requested frame rate -> onto the request's skeleton, if any.
+fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
+motion (root integrated) -> feet pinned and gliding feet lifted -> time warp putting its
+kinematic beats on the song's pulses (``motion.beat_warp``) -> the requested frame rate ->
+onto the request's skeleton, if any.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio, ik
+from motion import audio
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
@@ -54,6 +55,8 @@ class DanceJob:
     x: np.ndarray
     tempo: float
     beats: np.ndarray
+    pulses: np.ndarray  # the beats, and the half beats where the song hits them as hard
+    playing: np.ndarray  # (F,) bool: frames where the music plays
     genre: str | None
     seed: int
     start: np.ndarray
@@ -192,8 +195,8 @@ class DanceEngine(Engine):
         rng = np.random.default_rng(seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])
         noise_seed = int(rng.integers(2**31))
-        return DanceJob(x, float(feats.tempo), feats.beats, genre, seed, start, noise_seed,
-                        beat_warp, foot_cleanup)  # fmt: skip
+        return DanceJob(x, float(feats.tempo), feats.beats, feats.pulses, feats.playing, genre,
+                        seed, start, noise_seed, beat_warp, foot_cleanup)  # fmt: skip
 
     def predict(self, job: DanceJob, timer: StageTimer) -> DanceNetworks:
         """The audio graph (codes, genre probabilities), the genre (the given one, else the
@@ -230,8 +233,9 @@ class DanceEngine(Engine):
         )
 
     def _dance(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> DanceResult:
-        """The rolled-out poses -> a canonical dance at 30 fps: low-passed, root integrated,
-        its kinematic beats warped onto the music's, feet pinned; and its beat alignment."""
+        """The rolled-out poses -> a canonical dance at 30 fps: low-passed, standstills
+        filled, root integrated, feet cleaned up, its kinematic beats warped onto the music's
+        pulses; and its beat alignment."""
         warnings: list[str] = []
         if job.genre is None:
             p = out.genre_probs[out.genre]
@@ -240,20 +244,15 @@ class DanceEngine(Engine):
             warnings.append("no beat found in the music: the dance is not beat-aligned")
         with timer.stage("motion"):
             raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
-            motion, _ = DF.decode(raw)
+            _, motion = DF.keep_moving(raw, job.playing)
         beats = job.beats
+        if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
+            with timer.stage("foot_cleanup"):
+                motion = DF.clean_feet(motion)
         if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
-                motion = BW.warp_to_beats(motion, beats).motion
-        if job.foot_cleanup:
-            with timer.stage("foot_cleanup"):
-                contacts = DF.dance_contacts(K.global_positions(motion), motion.fps)
-                motion = ik.pin_canonical_feet(motion, contacts)
-        bas, chance = 0.0, 0.0
-        if len(beats) >= 3:
-            kin = BW.kinematic_beats(K.global_positions(motion), motion.fps)
-            bas = BW.beat_alignment_score(kin, beats)
-            chance = BW.shifted_grid_baseline(kin, beats, draws=50).mean
+                motion = BW.warp_to_beats(motion, job.pulses).motion
+        bas, chance = BW.alignment(motion, beats)
         return DanceResult(motion, out.genre, out.genre_probs, job.genre is not None,
                            job.tempo, beats, bas, chance, warnings)  # fmt: skip
 

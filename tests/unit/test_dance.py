@@ -195,30 +195,120 @@ def test_evaluation_energy_blocks_are_whole_30_second_blocks():
 
 
 def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
-    """The whole of ``eval_dance.evaluate`` with the shipped model on one held-out song,
-    two seeds and one minute instead of ten: a full run takes many minutes, and its per-seed
-    figures (one row per seed, the extremes taken over all seeds) are checked nowhere else."""
+    """The whole of ``eval_dance.evaluate`` with the shipped model on one generated song,
+    one shared song, one held-out song, two seeds and one minute instead of ten: a full run
+    takes many minutes, and its per-seed figures are checked nowhere else."""
     from tests.conftest import data_path, recorded_evaluation
+    from tests.songs import beat_song
     from training import eval_dance as ED
 
     data_path("dance-with-melody")  # skips without the dance data
     held, train = ED.held_out_songs()
     monkeypatch.setattr(ED, "held_out_songs", lambda: (held[:1], train))
     monkeypatch.setattr(ED, "TEN_MINUTES", 60.0)
-    report = ED.evaluate(seeds=2, log=lambda *_: None)
+    song = beat_song("four_on_the_floor", 124.0, seconds=20.0)
+    report = ED.evaluate(seeds=2, log=lambda *_: None, test_songs=[song],
+                         shared_names=["DANCE_W_8"])  # fmt: skip
+    (row,) = report["generated_set"]["songs"]
+    assert row["pattern"] == "four_on_the_floor" and row["f_measure"] > 0.9
+    assert row["f_any_level"] >= row["f_measure"]
+    (dance,) = row["dances"]
+    assert 0.0 <= dance["chance"] < dance["bas"] <= 1.0
+    assert row["passes"] == (dance["bas"] >= 0.2 and dance["bas"] >= 1.5 * dance["chance"])
+    assert list(report["shared_songs"]) == ["DANCE_W_8"]
+    assert report["shared_songs"]["DANCE_W_8"]["seconds"] > 60
     assert len(report["songs"]) == 1
-    (song,) = report["songs"].values()
-    assert len(song["generated"]) == len(song["generated_no_warp"]) == 2  # one per seed
+    (held_song,) = report["songs"].values()
+    assert len(held_song["generated"]) == 2  # the requested genre, one per seed
     ba = report["beat_alignment"]
     assert ba["generated"]["n"] == ba["generated_no_warp"]["n"] == 2 and ba["real"]["n"] == 1
-    assert all(0.0 <= row["bas"] <= 1.0 for row in ba.values())
-    assert report["genre_accuracy"]["n_generated"] == 2
+    assert all(0.0 <= r["bas"] <= 1.0 for r in ba.values())
+    genre = report["genre_accuracy"]
+    assert genre["n_generated"] == 2 * 4  # every genre asked, per seed
+    assert sum(sum(r.values()) for r in genre["confusion"].values()) == 8
     ten = report["ten_minutes"]
     assert [r["seed"] for r in ten["per_seed"]] == [0, 1]
     assert ten["frames"] >= 60 * 30 - 1  # a minute of motion for a minute of music
     assert ten["per_30s_min"] == min(r["per_30s_min"] for r in ten["per_seed"])
-    assert ten["per_30s_max"] == max(r["per_30s_max"] for r in ten["per_seed"])
     assert 0.0 < ten["per_30s_min"] <= ten["per_30s_max"]  # it moves, and min <= max
-    assert "2 seeds" in ED.markdown(report)
+    assert ten["slowest_5s_share"] == min(r["slowest_5s_share"] for r in ten["per_seed"])
+    text = ED.markdown(report)
+    assert "four_on_the_floor" in text and "2 seeds" in text
     recorded = recorded_evaluation(ED.record_in_manifest, report, tmp_path)
     assert recorded["held_out_songs"]["seeds"] == 2
+    assert recorded["held_out_songs"]["generated_set"]["songs"] == 1
+
+
+def test_stalls_are_slow_windows_of_music():
+    fps = 30.0
+    speed = np.full(900, 40.0)
+    speed[300:480] = 5.0  # 6 s at an eighth of the median
+    starts = DF.stalls(speed, fps)
+    means = np.array([speed[i : i + 150].mean() for i in range(900 - 150 + 1)])
+    np.testing.assert_allclose(starts * fps, np.flatnonzero(means < 0.3 * 40.0))
+    assert 9.0 < starts[0] < 10.0 and 11.0 < starts[-1] < 12.0  # around the slow 10-16 s
+    playing = np.ones(900, bool)
+    playing[290:500] = False  # the music stopped: not a stall
+    assert len(DF.stalls(speed, fps, playing)) == 0
+    speed[300:480] = 13.0  # above 30 % of the median
+    assert len(DF.stalls(speed, fps)) == 0
+
+
+def test_keep_moving_fills_a_standstill_only(walk):
+    """A walk (repeated to 32 s) slowed to a near standstill for 6 s in its middle: that
+    stretch is filled with the walk's own steps, and the rest is left as it was."""
+    from motion import beat_warp as BW
+    from motion import kinematics as K
+
+    raw = np.tile(DF.encode(walk).features.astype(np.float64), (16, 1))  # 32 s
+    frames = len(raw)
+    middle = slice(frames // 2 - 90, frames // 2 + 90)
+    course = raw[middle].mean(axis=0)
+    body = slice(0, DF.CONTACTS.start)
+    raw[middle, body] = course[body] + 0.1 * (raw[middle, body] - course[body])
+    raw[middle, DF.VELOCITY] *= 0.1
+    raw[middle, DF.TURN] *= 0.1
+    before = BW.joint_speed(K.global_positions(DF.decode(raw)[0]), DF.FPS)
+    _, motion = DF.keep_moving(raw.astype(np.float32))
+    after = BW.joint_speed(K.global_positions(motion), DF.FPS)
+    inner = slice(middle.start + 15, middle.stop - 15)
+    assert after[inner].mean() > 3.0 * before[inner].mean()
+    assert not DF.stalls(after, DF.FPS).size and DF.stalls(before, DF.FPS).size
+    edge = slice(0, middle.start - 60)
+    np.testing.assert_allclose(after[edge], before[edge], rtol=1e-4, atol=1e-3)
+    silent = np.zeros(frames, bool)  # the music stopped: a standstill is no stall
+    _, untouched = DF.keep_moving(raw.astype(np.float32), silent)
+    np.testing.assert_allclose(BW.joint_speed(K.global_positions(untouched), DF.FPS), before,
+                               rtol=1e-4, atol=1e-3)  # fmt: skip
+
+
+def test_lift_gliding_feet_lifts_a_skating_stretch_only():
+    """A standing body carried along the floor for 1.3 s of 10: both feet skate there. The
+    lift raises them to the clearance while they move and leaves the rest untouched."""
+    from motion import canonical as C
+    from motion import contacts as CT
+    from motion.skeleton import Motion
+
+    frames, fps = 300, 30.0
+    lrot = np.zeros((frames, len(C.JOINTS), 4))
+    lrot[..., 3] = 1.0
+    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
+    lpos[:, 0] = 0.0
+    glide = slice(100, 140)
+    x = np.zeros(frames)
+    x[glide] = np.arange(40) * DF.LEG / fps  # one leg length per second
+    x[140:] = x[139]
+    lpos[:, C.INDEX["Hips"], 0] += x
+    motion = Motion(C.SKELETON, fps, lrot, lpos)
+    out = DF.lift_gliding_feet(motion)
+    before, after = K.global_positions(motion), K.global_positions(out)
+    feet = list(CT.CANONICAL_FOOT_JOINTS)
+    ground = CT.ground_heights(before, feet, DF.LEG)
+    height = after[:, feet, 1] - ground
+    assert (height[105:135] > 0.9 * DF.GLIDE_CLEARANCE * DF.LEG).all()
+    np.testing.assert_allclose(after[:80], before[:80], atol=1e-9)  # planted: untouched
+    np.testing.assert_allclose(after[160:], before[160:], atol=1e-9)
+    np.testing.assert_allclose(after[:, C.INDEX["Hips"]], before[:, C.INDEX["Hips"]])
+    bones = [np.linalg.norm(p[:, 1:] - p[:, C.PARENTS[1:]], axis=-1) for p in (before, after)]
+    np.testing.assert_allclose(bones[1], bones[0], atol=1e-6)  # lengths kept
+    assert CT.canonical_foot_sliding(out) < 0.5 * CT.canonical_foot_sliding(motion)

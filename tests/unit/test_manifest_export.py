@@ -89,12 +89,19 @@ def test_dance_evaluation_records_its_summary(models):
         "foot_sliding_cm_s": {"real": 9.0, "generated": 6.0},
         "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25},
         "ten_minutes": {"frames": 18000, "per_30s_min": 26.3},
+        "generated_set": {"songs": [
+            {"f_measure": 0.9, "passes": True, "dances": [{"stalls": 0}]},
+            {"f_measure": 0.7, "passes": False, "dances": [{"stalls": 2}]}]},
+        "shared_songs": {"x": {"bas": 0.6, "chance": 0.3, "stalls": 0}},
     }  # fmt: skip
     ED.record_in_manifest(report, models)
     (model,) = load_manifest(models).models
     figures = model.metrics["evaluation"]["held_out_songs"]
     assert figures["songs"] == 2 and figures["beat_alignment"]["generated"]["bas"] == 0.55
     assert figures["ten_minutes"]["frames"] == 18000
+    assert figures["generated_set"] == {"songs": 2, "tracker_f_measure": 0.8, "passing": 1,
+                                        "stalls": 2}  # fmt: skip
+    assert figures["shared_songs"]["songs"] == 1
     assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
         ED.record_in_manifest(report | {"model_version": "2"}, models)
