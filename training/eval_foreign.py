@@ -180,7 +180,9 @@ def through_service(motion: Motion) -> Motion:
     from service.config import Settings
     from service.metrics import StageTimer
 
-    return pipeline.load_clip(bvh.dumps(motion), Settings(), StageTimer("eval-foreign")).canonical
+    settings = Settings()
+    upload = pipeline.text_upload(bvh.dumps(motion), settings, field="content")
+    return pipeline.load_clip(upload, settings, StageTimer("eval-foreign")).canonical
 
 
 def load_items(halves: tuple[str, ...], root: Path | None = None) -> dict[str, list[Item]]:
