@@ -343,14 +343,16 @@ def train_judge(clips: list) -> StyleJudge:
 
 def judge_for(clips: list, cache: Path | None) -> StyleJudge:
     """:func:`train_judge`, kept in ``cache`` under a hash of the code that makes it and
-    of the takes (labels, lengths)."""
+    of the takes: labels and the canonical motion itself (``training.data``'s clip cache
+    does not notice when retargeting changes)."""
     if cache is None:
         return train_judge(clips)
     key = hashlib.sha256(classifier_code_key().encode())
     for part in (train_judge, action_group, StyleJudge, canonical_style):
         key.update(inspect.getsource(part).encode())
-    rows = sorted((c.take, c.style, c.content, c.num_frames) for c in clips)
-    key.update(json.dumps(rows).encode())
+    for c in sorted(clips, key=lambda c: c.take):
+        key.update(json.dumps([c.take, c.style, c.content]).encode())
+        key.update(np.ascontiguousarray(c.lrot).tobytes() + np.ascontiguousarray(c.root).tobytes())
     path = Path(cache) / f"foreign-judge-{key.hexdigest()[:16]}.pkl"
     if path.exists():
         with path.open("rb") as f:
