@@ -75,6 +75,15 @@ eval-fast: $(VENV)/.dev
 eval-styles: $(VENV)/.dev
 	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json --manifest --classifier-cache runs/eval/classifiers
 
+# Both style families on motion from outside Bandai (CMU, Xia, CMU dance, other rigs' exports)
+# judged by a style classifier of every real Bandai take (training/eval_foreign.py): the
+# development half by default; EVAL_FOREIGN_ARGS="--half test" (or both, --manifest) for more.
+# Writes runs/eval/foreign-<half>.json; the classifier is kept in runs/eval/classifiers.
+EVAL_FOREIGN_ARGS ?=
+.PHONY: eval-foreign
+eval-foreign: $(VENV)/.dev
+	$(PY) -m training.eval_foreign $(EVAL_FOREIGN_ARGS)
+
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
 

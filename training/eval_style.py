@@ -307,7 +307,9 @@ class ConvClipClassifier:
         x = ((features - self.mean) / self.std).astype(np.float32)
         return np.pad(x, ((0, max(0, self.WINDOW - len(x))), (0, 0)), mode="edge")
 
-    def predict(self, features: np.ndarray) -> str:
+    def log_probabilities(self, features: np.ndarray) -> np.ndarray:
+        """``(classes,)`` a clip's log-probability of each of :attr:`classes`, averaged over
+        its windows and the networks (the whole ranking: top-k needs more than the argmax)."""
         import torch
         import torch.nn.functional as F
 
@@ -318,7 +320,10 @@ class ConvClipClassifier:
             logp = sum(
                 F.log_softmax(net(windows.transpose(1, 2)), dim=-1).mean(dim=0) for net in self.nets
             )
-        return str(self.classes[int(logp.argmax())])
+        return (logp / len(self.nets)).numpy().astype(np.float64)
+
+    def predict(self, features: np.ndarray) -> str:
+        return str(self.classes[int(np.argmax(self.log_probabilities(features)))])
 
 
 class FoldedClassifier:

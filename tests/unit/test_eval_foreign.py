@@ -1,0 +1,253 @@
+"""The foreign-content yardstick: its measures on motions whose answer is known, its split
+into halves, its rig variants, the merged style names, and one end-to-end run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motion import bvh, retarget
+from motion import canonical as C
+from motion import features as Fe
+from motion import kinematics as K
+from motion import rotations as rot
+from motion.skeleton import Motion
+from motion.styles import STYLE_ALIASES, canonical_style
+from tests.rigs import FIXTURE
+from training import eval_foreign as EF
+
+BANDAI_STYLES = (
+    "normal", "happy", "sad", "angry", "proud", "not-confident", "masculinity", "feminine",
+    "childish", "old", "tired", "active", "musical", "giant", "chimpira",  # dataset-1
+    "active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful",  # dataset-2
+)  # fmt: skip
+
+
+def swinging(frames: int = 120, hz: float = 1.0, phase: float = 0.0, sideways: bool = False):
+    """A canonical body standing in place, arms and legs swinging at ``hz`` (left and right in
+    opposition): forward and back, or with ``sideways`` out to the sides and up."""
+    t = np.arange(frames) / C.FPS
+    angle = 0.6 * np.sin(2 * np.pi * hz * t + phase)
+    arms = np.array([0.0, 0.0, 1.0] if sideways else [0.0, 1.0, 0.0])  # the rest arm lies along x
+    legs = np.array([0.0, 0.0, 1.0] if sideways else [1.0, 0.0, 0.0])  # the rest leg along -y
+    lrot = rot.identity((frames, len(C.JOINTS)))
+    for name, sign, axis in (("UpperArm_L", 1, arms), ("UpperArm_R", -1, arms),
+                             ("UpperLeg_L", -1, legs), ("UpperLeg_R", 1, legs)):  # fmt: skip
+        lrot[:, C.INDEX[name]] = rot.from_rotvec(sign * angle[:, None] * axis)
+    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
+    lpos[:, 0] = 0.0
+    lpos[:, 1] = [0.0, 90.0, 0.0]
+    return Motion(C.SKELETON, C.FPS, lrot, lpos)
+
+
+def test_merged_names_are_sixteen_and_each_alias_scores_as_its_twin():
+    assert canonical_style("old") == "elderly" and canonical_style("tired") == "exhausted"
+    assert canonical_style("masculinity") == "masculine" and canonical_style("happy") == "happy"
+    assert len(set(BANDAI_STYLES)) == 19 and len({canonical_style(s) for s in BANDAI_STYLES}) == 16
+    assert set(STYLE_ALIASES.values()) <= set(BANDAI_STYLES)
+
+
+def test_content_kept_is_one_for_the_motion_itself_and_for_a_time_warped_copy():
+    motion = swinging()
+    assert EF.content_kept(motion, motion) == pytest.approx(1.0, abs=1e-9)
+    for factor in (0.6, 1.5):  # the output of a time warp, brought back onto the content's frames
+        warped = Fe.time_warp(motion, factor)
+        assert warped.num_frames != motion.num_frames
+        assert EF.content_kept(warped, motion) > 0.99
+
+
+def test_content_kept_is_low_for_an_unrelated_motion():
+    sideways = swinging(hz=1.7, phase=1.0, sideways=True)
+    assert abs(EF.content_kept(sideways, swinging())) < 0.3
+
+
+def test_effector_paths_are_in_the_bodys_own_frame():
+    """Turning and moving the whole body leaves hands and feet relative to the hips as they were."""
+    motion = swinging()
+    turn = rot.about_y(np.full(motion.num_frames, 2.0))
+    lrot, lpos = motion.lrot.copy(), motion.lpos.copy()
+    lrot[:, 1] = rot.mul(turn, lrot[:, 1])
+    lpos[:, 1] += [30.0, 0.0, -200.0]
+    moved = motion.replace(lrot=lrot, lpos=lpos)
+    np.testing.assert_allclose(EF.effector_paths(moved), EF.effector_paths(motion), atol=1e-6)
+
+
+def test_spread_is_zero_for_identical_outputs_and_averages_two_names_of_one_style():
+    same = np.tile(np.arange(6.0), (4, 1))
+    assert EF.style_spread(same, ["angry", "sad", "proud", "happy"]) == 0.0
+    rows = np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 5.0]])  # elderly's two names average to (1, 0)
+    styles = [canonical_style(n) for n in ("old", "elderly", "sad")]
+    assert EF.style_spread(rows, styles) == pytest.approx(5.0)
+    assert EF.mean_pairwise_distance(np.array([[0.0, 0.0], [3.0, 4.0], [0.0, 0.0]])) == (
+        pytest.approx(10.0 / 3.0)
+    )
+
+
+def test_descriptors_tell_motions_apart_and_ignore_where_the_body_stands():
+    a, b = swinging(), swinging(hz=2.5, sideways=True)
+    lpos = a.lpos.copy()
+    lpos[:, 1] += [100.0, 0.0, 50.0]
+    np.testing.assert_allclose(EF.descriptor(a), EF.descriptor(a.replace(lpos=lpos)), atol=1e-6)
+    assert np.linalg.norm(EF.descriptor(a) - EF.descriptor(b)) > 0.1
+
+
+def test_recognition_counts_top1_top3_recall_and_the_most_predicted_style():
+    classes = ["a", "b", "c", "d"]
+    logp = np.log(
+        np.array([
+            [0.7, 0.1, 0.1, 0.1],  # asked a, said a
+            [0.1, 0.2, 0.6, 0.1],  # asked b, said c (b second)
+            [0.1, 0.2, 0.6, 0.1],  # asked c, said c
+            [0.6, 0.1, 0.2, 0.1],  # asked d, said a, d last
+            [0.1, 0.1, 0.7, 0.1],  # asked c, said c
+        ])
+    )  # fmt: skip
+    got = EF.recognition(["a", "b", "c", "d", "c"], logp, classes)
+    assert got["top1"] == pytest.approx(3 / 5) and got["top3"] == pytest.approx(4 / 5)
+    assert got["recall"] == {"a": 1.0, "b": 0.0, "c": 1.0, "d": 0.0}
+    assert got["top1_mean_per_style"] == pytest.approx(0.5)
+    assert got["most_predicted"] == "c" and got["most_predicted_share"] == pytest.approx(3 / 5)
+    assert got["confusion"]["b"] == {"c": 1} and got["under_30"] == ["b", "d"]
+
+
+def test_within_actor_recall_only_chooses_among_one_actors_styles():
+    classes = ["active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful"]
+
+    def row(style, probs, dataset="dataset-2"):
+        return {"style": style, "dataset": dataset, "logp": np.log(np.asarray(probs))}
+
+    held = [
+        row("elderly", [0.1, 0.25, 0.2, 0.01, 0.01, 0.42, 0.01]),  # normal, elderly in-group
+        row("exhausted", [0.5, 0.1, 0.2, 0.05, 0.05, 0.05, 0.05]),  # active, an actor-mate
+        row("elderly", [0.01, 0.01, 0.9, 0.05, 0.01, 0.01, 0.01], dataset="dataset-1"),
+    ]  # fmt: skip
+    group = EF.within_actor(held, classes)["active, elderly, exhausted"]
+    assert group["n"] == 2 and group["recall_within_group"] == 0.5
+    assert group["top1"] == 0.0 and group["chance"] == pytest.approx(1 / 3, abs=1e-4)
+
+
+def test_every_bandai_action_falls_in_one_of_five_groups():
+    index = {
+        "walks": (
+            "walk",
+            "walk-back",
+            "walk-left",
+            "walk-right",
+            "walk-turn-left",
+            "walk-turn-right",
+        ),
+        "runs": ("run", "dash"),
+        "waves": ("bye", "byebye", "wave-both-hands", "wave-left-hand", "wave-right-hand"),
+        "raises": ("raise-up-both-hands", "raise-up-left-hand", "raise-up-right-hand"),
+        "other": ("bow", "guide", "respond", "call", "punch", "kick", "slash", "dance-short"),
+    }
+    for group, contents in index.items():
+        assert {EF.action_group(c) for c in contents} == {group}
+
+
+def _takes():
+    return {
+        "cmu-31": [f"cmu-31/{i:02d}_01" for i in range(9)],
+        "xia": [f"xia/clip_{i}" for i in range(9)],
+        "cmu-dance-43": [f"cmu-dance-43/dance_{i}" for i in range(5)],
+        "cmu-dance-3dsmax": ["cmu-dance-3dsmax/94_01"],
+    }
+
+
+def test_split_is_deterministic_by_take_and_balanced_across_folders():
+    takes = _takes()
+    half_of = EF.split_halves(takes)
+    shuffled = {f: list(reversed(v)) for f, v in reversed(list(takes.items()))}
+    assert EF.split_halves(shuffled) == half_of  # no dependence on listing order
+    every = [t for v in takes.values() for t in v]
+    assert sorted(half_of) == sorted(every) and set(half_of.values()) == {"dev", "test"}
+    for names in takes.values():
+        halves = [half_of[t] for t in names]
+        assert abs(halves.count("dev") - halves.count("test")) <= 1
+    assert abs(list(half_of.values()).count("dev") - len(every) / 2) <= 0.5
+    takes["xia"].append("xia/clip_new")  # another take changes only its own folder and later
+    assert {t: h for t, h in EF.split_halves(takes).items() if t.startswith("cmu-31")} == {
+        t: h for t, h in half_of.items() if t.startswith("cmu-31")
+    }
+
+
+def test_segments_are_at_most_eight_seconds_and_at_most_four():
+    for frames, count, longest in ((30, 1, 30), (274, 2, 137), (900, 4, 225), (2575, 4, 240)):
+        parts = EF.segments(swinging(frames=frames))
+        assert len(parts) == count and max(p.num_frames for p in parts) == longest
+        assert parts[0].lrot[0].tolist() == swinging(frames=frames).lrot[0].tolist()
+
+
+def test_rig_variants_read_through_the_service_match_the_original():
+    original = bvh.load(FIXTURE)
+    canon = K.global_positions(retarget.to_canonical(original))
+    for name, variant in EF.rig_variants(original).items():
+        names = variant.skeleton.names
+        assert any(n.startswith("mixamorig:") for n in names) == (name == "mixamo")
+        back = K.global_positions(EF.through_service(variant))
+        assert back.shape == canon.shape
+        np.testing.assert_allclose(back, canon, atol=0.01, err_msg=name)
+
+
+def test_the_split_covers_every_source_folder():
+    from tests.conftest import data_path
+
+    root = data_path("cmu-31").parent
+    takes = EF.foreign_takes(root)
+    assert set(takes) == set(EF.FOLDERS) and all(takes.values())
+    every = [t.split("/")[1] for v in takes.values() for t in v]
+    assert len(every) == len(set(every)) == 24  # CMU 05_20, in two folders, once
+    half_of = EF.split_halves(takes)
+    for folder, names in takes.items():  # cmu-dance-3dsmax has one take, in one half
+        halves = {half_of[t] for t in names}
+        assert halves == {"dev", "test"} or (len(names) == 1 and len(halves) == 1), folder
+
+
+def test_log_probabilities_rank_the_classes_the_prediction_takes():
+    from training.eval_style import ConvClipClassifier
+
+    rng = np.random.default_rng(0)
+    feats = [rng.normal(size=(60, 5)).astype(np.float32) + k for k in (0, 0, 3, 3)]
+    clf = ConvClipClassifier(feats, ["low", "low", "high", "high"], seeds=(0,), steps=5)
+    logp = clf.log_probabilities(feats[2])
+    assert logp.shape == (2,) and np.all(logp <= 0.0)
+    assert clf.classes[int(np.argmax(logp))] == clf.predict(feats[2])
+
+
+def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch):
+    """:func:`evaluate` with both shipped families on one item of the test half and a judge
+    trained a few steps (a full run's took 51 minutes on two busy cores), its tables and its
+    record."""
+    import shutil
+
+    from service.config import Settings
+    from service.manifest import load_manifest
+    from tests.conftest import data_path
+    from training.eval_style import ConvClipClassifier
+
+    data_path("bandai")
+    data_path("cmu-31")
+    monkeypatch.setattr(ConvClipClassifier.__init__, "__defaults__", ((0,), 3))
+    report = EF.evaluate(("test",), limit=1, log=lambda *_: None)["test"]
+    assert report["half"] == "test" and report["items"] == 1 and len(report["styles"]) == 16
+    for family in EF.FAMILIES:
+        figures = report["families"][family]
+        names = figures["shipped_names"]
+        assert figures["n"] == len(names) and set(figures["top1_by_name"]) == set(names)
+        assert 0.0 <= figures["top1"] <= figures["top3"] <= 1.0
+        assert figures["spread_ratio"] > 0.0 and -1.0 <= figures["content_kept"] <= 1.0
+        assert sum(b["n"] for b in figures["by_source"].values()) == len(names)
+    reference = report["real_bandai"]["leave_action_out"]
+    assert reference["n"] == 454
+    clips = [g["n"] for g in reference["within_actor_groups"].values()]
+    assert clips == [120, 80, 80]  # dataset-2's takes only: 40 per style
+    assert "test half" in EF.markdown(report)
+    models = tmp_path / "models"
+    shutil.copytree(Settings().models_dir, models)
+    EF.record_in_manifest(report, models)
+    for figures in report["families"].values():
+        entry = next(m for m in load_manifest(models).models if m.name == figures["model_name"])
+        recorded = entry.metrics["evaluation"]["foreign_test_half"]
+        assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
+    with pytest.raises(ValueError, match="test half"):
+        EF.record_in_manifest({**report, "half": "dev"}, models)
