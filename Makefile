@@ -45,35 +45,27 @@ LOAD_ARGS ?=
 load: $(VENV)/.dev
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
 
-# aberman2020 translator on Bandai (CPU, hours). Resumes from checkpoints/translator.pt when it
-# exists; TensorBoard scalars in runs/translator/. Extra flags: TRANSLATOR_ARGS="--max-steps 100".
+# The translator: replays training/translator/schedule.json (CPU, hours), continuing from the
+# stages checkpoints/translator.pt has finished (TRANSLATOR_ARGS="--from-scratch" to rebuild).
 TRANSLATOR_ARGS ?=
 .PHONY: train-translator
 train-translator: $(VENV)/.dev
-	$(PY) -m training.translator --threads 1 $(if $(wildcard checkpoints/translator.pt),--resume) $(TRANSLATOR_ARGS)
+	$(PY) -m training.translator $(TRANSLATOR_ARGS)
 
-# holden2017 fast style networks: the loss network (autoencoder), then one transformation
-# network per Bandai style, then ONNX + manifest entry "fast-bandai". Logs in runs/fast/,
-# weights in checkpoints/fast/. Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
+# holden2017 fast style networks, one per translator style, distilled from the shipped
+# translator (its outputs are their targets): the loss network (autoencoder, the
+# projection) first when checkpoints/fast/autoencoder.pt is missing, then the style
+# networks, then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.
+# Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
 FAST_AE_ARGS ?= --steps 3600 --minutes 25
-FAST_STYLE_ARGS ?= --steps 800 --minutes-per-style 2
-.PHONY: train-fast export-fast eval-fast eval-styles bench-fast
+FAST_STYLE_ARGS ?=
+.PHONY: train-fast export-fast bench-fast show-styles
 train-fast: $(VENV)/.dev
-	$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS)
-	$(PY) -m training.fast_style --all $(FAST_STYLE_ARGS)
+	$(if $(wildcard checkpoints/fast/autoencoder.pt),,$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS))
+	$(PY) -m training.fast_style --all --threads 1 $(FAST_STYLE_ARGS)
 
 export-fast: $(VENV)/.dev
 	$(PY) -m model_export.fast
-
-# Style and content recognition and foot skating of the shipped fast networks on their
-# held-out takes, beside the baselines (training/eval_style.py); eval-styles judges both
-# families side by side on the same takes (those held out from the translator's training).
-# Each records its figures in the model's manifest entry (metrics.evaluation).
-eval-fast: $(VENV)/.dev
-	$(PY) -m training.eval_style fast --json runs/eval/fast.json --manifest --classifier-cache runs/eval/classifiers
-
-eval-styles: $(VENV)/.dev
-	$(PY) -m training.eval_style all --takes translator --json runs/eval/styles.json --manifest --classifier-cache runs/eval/classifiers
 
 # Both style families on motion from outside Bandai (CMU, Xia, CMU dance, other rigs' exports)
 # judged by a style classifier of every real Bandai take (training/eval_foreign.py): the
@@ -86,6 +78,10 @@ eval-foreign: $(VENV)/.dev
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
+
+# docs/styles.svg: a clip from outside Bandai sent to several styles by both families.
+show-styles: $(VENV)/.dev
+	$(PY) -m training.show_styles
 
 # Dance (jacob2019 made to work): the alignment study writes training/dance_alignment.json;
 # training resumes from checkpoints/dance.pt when it exists (TensorBoard in runs/dance/).
@@ -106,16 +102,13 @@ export-dance: $(VENV)/.dev
 eval-dance: $(VENV)/.dev
 	$(PY) -m training.eval_dance --json runs/eval/dance.json --manifest
 
-# aberman2020 translator: ONNX graphs, statistics, style table and the manifest entry
-# "translator-bandai" from a copy of checkpoints/translator.pt (the training overwrites it).
+# The translator: ONNX graphs, statistics, style table and the manifest entry
+# "translator-bandai" from a copy of checkpoints/translator.pt (a training overwrites it).
 # Extra flags: EXPORT_TRANSLATOR_ARGS="--checkpoint other.pt".
 EXPORT_TRANSLATOR_ARGS ?=
-.PHONY: export-translator eval-translator
+.PHONY: export-translator
 export-translator: $(VENV)/.dev
 	$(PY) -m model_export.translator $(EXPORT_TRANSLATOR_ARGS)
-
-eval-translator: $(VENV)/.dev
-	$(PY) -m training.eval_style translator --json runs/eval/translator.json --manifest --classifier-cache runs/eval/classifiers
 
 # Speed tables, each measured in one run (ratios, not absolute numbers, are what compare):
 # BVH parse/write, BVH reading against bvhio 1.5.4 on the same real files, retargeting (with

@@ -3,11 +3,10 @@ and 3,840 frames, onnxruntime vs torch eager, measured in one run.
 
     python -m bench.bench_networks [--repeats 20] [--lengths 240 960 3840] [--json]
 
-Translator (aberman2020), what a transfer runs: the content encoder and the decoder with a
-style code, and the same plus the 3D style encoder over the content (a transfer mixes the
-content's own code with the target's by ``strength``); inputs padded to the engine's length
-bucket (``service.engines.translator.padded_length``), frames/s counted on the unpadded
-length. Dance (jacob2019 made to work): the audio network over the whole input (padded to
+Translator, what a transfer runs: the restyler over the content's windows (half a window
+apart) with a style code, and the same plus the 3D style encoder over the content (its own
+code, padded to the engine's length bucket, ``service.engines.translator.padded_length``);
+frames/s counted on the clip's length. Dance (jacob2019 made to work): the audio network over the whole input (padded to
 the engine's bucket of 256 frames) and the step network run autoregressively for every
 frame (its own pose and LSTM states fed back, batch 1), and the two together (the sum of
 their medians). Random standard-normal inputs: the speed does not depend on the values.
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.bench_fast import timed
+from motion import features as Fe
 
 LENGTHS = (240, 960, 3840)
 REPO = Path(__file__).resolve().parent.parent
@@ -66,60 +66,59 @@ def translator_rows(entry, settings, lengths, repeats: int, threads: int) -> tup
     """Rows for the translator networks, and where the torch weights came from."""
     import torch
 
+    from model_export.translator import load_checkpoint
     from service.engines.base import create_session
     from service.engines.translator import BUCKET, padded_length
-    from training.translator.model import ModelConfig, Translator
-    from training.translator.train import DEFAULT_CHECKPOINT, load_translator
+    from training.translator.networks import NetworkConfig, Translator
 
-    config = dict(entry.extra["model_config"])
+    config = NetworkConfig(**entry.extra["network"])
+    checkpoint = REPO / "checkpoints" / "translator.pt"
     weights = "fresh networks of the shipped sizes (no checkpoint)"
-    g = None
-    if DEFAULT_CHECKPOINT.exists():
-        g, _, meta = _checkpoint_copy(DEFAULT_CHECKPOINT, load_translator)
-        if ModelConfig(**meta["model_config"]).to_dict() == ModelConfig(**config).to_dict():
-            weights = f"{DEFAULT_CHECKPOINT.relative_to(REPO)} (step {meta['step']})"
+    net = None
+    if checkpoint.exists():
+        net, _, payload = load_checkpoint(checkpoint)
+        if net.cfg.to_dict() == config.to_dict():
+            weights = f"{checkpoint.relative_to(REPO)} (step {payload['step']})"
         else:
-            g = None
+            net = None
             weights = "fresh networks of the shipped sizes (the checkpoint's sizes differ)"
-    if g is None:
+    if net is None:
         torch.manual_seed(0)
-        g = Translator(ModelConfig(**config)).eval()
-    cfg = g.cfg
+        net = Translator(config).eval()
     sessions = {
         name: create_session(settings.models_dir / entry.graphs[name].file, threads)
-        for name in ("content_encoder", "style3d", "decoder")
+        for name in ("style3d", "restyler")
     }
+    window = int(entry.extra["window"])
     minimum = int(entry.extra.get("receptive_field", BUCKET))
     rng = np.random.default_rng(0)
     rows = []
     for frames in lengths:
+        count = max(1, -(-(frames - window) // (window // 2)) + 1)  # windows half a window apart
         padded = padded_length(frames, minimum)
-        content = rng.standard_normal((1, cfg.content_in, padded)).astype(np.float32)
-        motion3d = rng.standard_normal((1, cfg.style3d_in, padded)).astype(np.float32)
-        target = rng.standard_normal((1, cfg.style_dim)).astype(np.float32)
-        content_t, motion3d_t, target_t = (torch.from_numpy(a) for a in (content, motion3d, target))
+        content = rng.standard_normal((count, Fe.CONTROL_CHANNELS, window)).astype(np.float32)
+        motion3d = rng.standard_normal((1, Fe.STYLE3D_CHANNELS, padded)).astype(np.float32)
+        codes = rng.standard_normal((count, config.style_dim)).astype(np.float32)
+        content_t, motion3d_t, codes_t = (torch.from_numpy(a) for a in (content, motion3d, codes))
 
-        def ort_pair(content=content, target=target):
-            code = sessions["content_encoder"].run(None, {"content": content})[0]
-            return sessions["decoder"].run(None, {"code": code, "style_code": target})[0]
+        def ort_restyle(content=content, codes=codes):
+            return sessions["restyler"].run(None, {"content": content, "style_code": codes})[0]
 
-        def ort_transfer(content=content, motion3d=motion3d, target=target):
-            code = sessions["content_encoder"].run(None, {"content": content})[0]
-            own = sessions["style3d"].run(None, {"motion3d": motion3d})[0]
-            mixed = own + (target - own)
-            return sessions["decoder"].run(None, {"code": code, "style_code": mixed})[0]
+        def ort_transfer(content=content, motion3d=motion3d, codes=codes):
+            sessions["style3d"].run(None, {"motion3d": motion3d})
+            return ort_restyle(content, codes)
 
-        def torch_pair(content=content_t, target=target_t):
+        def torch_restyle(content=content_t, codes=codes_t):
             with torch.inference_mode():
-                return g.decoder(g.content_encoder(content), target)
+                return net.restyler(content, codes)
 
-        def torch_transfer(content=content_t, motion3d=motion3d_t, target=target_t):
+        def torch_transfer(content=content_t, motion3d=motion3d_t, codes=codes_t):
             with torch.inference_mode():
-                own = g.style3d(motion3d)
-                return g.decoder(g.content_encoder(content), own + (target - own))
+                net.style3d(motion3d)
+                return net.restyler(content, codes)
 
         for what, ort_fn, torch_fn in (
-            ("content encoder + decoder", ort_pair, torch_pair),
+            (f"restyler ({count} windows)", ort_restyle, torch_restyle),
             ("+ style3d of the content (a transfer)", ort_transfer, torch_transfer),
         ):
             t_ort = timed(ort_fn, repeats)

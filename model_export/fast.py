@@ -4,10 +4,11 @@
 
 Writes ``models/fast/projection.onnx`` (the loss network as manifold projection,
 ``motion (batch, time, 70) -> projected``), ``models/fast/style_<name>.onnx`` per trained
-style (``motion -> styled``), ``models/fast/stats.npz`` (feature statistics), ``models/fast/split.json`` (the held-out
-Bandai takes), and one
-manifest entry ``fast-bandai`` with every graph. Each graph is checked against torch at
-several lengths and batch sizes (``PARITY_SHAPES``, rtol 1e-4) before it is listed.
+style (``motion -> styled``), ``models/fast/stats.npz`` (feature statistics), and one
+manifest entry ``fast-bandai`` with every graph, each style's speed and the style names'
+aliases taken from the shipped translator (the networks' teacher, ``training.fast_style``).
+Each graph is checked against torch at several lengths and batch sizes (``PARITY_SHAPES``,
+rtol 1e-4) before it is listed.
 
 The TorchScript exporter is used: torch.export specialises the time axis of the
 projection (its odd-length pooling and crop), the TorchScript one keeps it symbolic.
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import shutil
 import warnings
 from pathlib import Path
@@ -94,6 +94,14 @@ def parity(module: torch.nn.Module, path: Path, seed: int = 0) -> float:
     return worst
 
 
+def translator_entry(models_dir: Path):
+    """The shipped translator's manifest entry: the teacher the styles were distilled from,
+    whose style speeds and other names they share."""
+    from service.manifest import load_manifest
+
+    return next(m for m in load_manifest(models_dir).models if m.family == "translator")
+
+
 def load_style(path: Path) -> tuple[FC.StyleNet, dict]:
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     net = FC.StyleNet(hidden=ckpt["config"]["hidden"], width=ckpt["config"]["width"])
@@ -117,11 +125,11 @@ def main(argv: list[str] | None = None) -> dict:
     ae = load_autoencoder(ckpt_dir / "autoencoder.pt")
     projection = FC.Projection(ae).eval()
     shutil.copyfile(ckpt_dir / "stats.npz", out / "stats.npz")
-    shutil.copyfile(ckpt_dir / "split.json", out / "split.json")  # held-out takes, for eval
-    split = json.loads((ckpt_dir / "split.json").read_text())
+    teacher = translator_entry(models_dir)
+    speeds = {name: info["speed"] for name, info in teacher.extra["styles"].items()}
 
     shape = ["batch", "time", FF.CHANNELS]
-    files = [f"{FOLDER}/stats.npz", f"{FOLDER}/split.json"]
+    files = [f"{FOLDER}/stats.npz"]
     graphs = {}
     parity_max: dict[str, float] = {}
     export_graph(projection, out / "projection.onnx", "projected")
@@ -147,11 +155,10 @@ def main(argv: list[str] | None = None) -> dict:
         result = ckpt["result"]
         styles[name] = {
             "graph": graph,
-            "clips": result["style_clips"],
-            "contents": result["contents"],
+            "clips": teacher.extra["styles"][name]["clips"],
+            "speed": speeds[name],
             "steps": result["steps"],
             "train_loss": result["train"],
-            "val_loss": result["val"],
             "trained_at": result.get("trained_at"),
         }
         print(f"exported {graph}: parity max abs {parity_max[graph]:.2e}", flush=True)
@@ -174,7 +181,10 @@ def main(argv: list[str] | None = None) -> dict:
             "parity_rtol": RTOL,
         },
         "extra": {
-            "paper": "holden2017 fast neural style transfer for motion",
+            "paper": "holden2017 fast neural style transfer for motion, distilled from the "
+                     "translator",
+            "teacher": f"{teacher.name} {teacher.version}",
+            "aliases": dict(teacher.extra.get("aliases", {})),
             "stats": f"{FOLDER}/stats.npz",
             "channels": FF.CHANNELS,
             "fps": FF.FPS,
@@ -182,8 +192,6 @@ def main(argv: list[str] | None = None) -> dict:
             "autoencoder": {"hidden": ae.conv.out_channels, "width": FC.WIDTH,
                             "steps": ae_result["step"]},
             "styles": styles,
-            "split": {k: split[k] for k in ("seed", "val_fraction", "stratify")}
-            | {"file": f"{FOLDER}/split.json", "validation_takes": len(split["validation_takes"])},
         },
     }  # fmt: skip
     MF.put_entry(entry, models_dir)

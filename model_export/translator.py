@@ -1,37 +1,29 @@
-"""Export the aberman2020 translator to ONNX, with its statistics and style table.
+"""Export the translator (``training.translator.networks``) to ONNX, with its statistics and
+style table.
 
     python -m model_export.translator [--checkpoint checkpoints/translator.pt] [--models-dir models]
 
-The checkpoint is copied to a temporary file first (a running training overwrites it every
-few minutes). Writes ``models/translator/``:
+Writes ``models/translator/``:
 
-- four single-file graphs with symbolic ``batch`` and time axes (``(B, C, T)``, ``T`` a
-  multiple of ``STRIDE``): ``content_encoder.onnx`` (``content (B, 130, time) -> code
-  (B, C_z, code_time)``), ``style3d.onnx`` (``motion3d (B, 63, time) -> style_code
-  (B, S)``), ``style2d.onnx`` (``motion2d (B, 32, time) -> style_code``), ``decoder.onnx``
-  (``code``, ``style_code`` -> ``output (B, 126, time)``), each checked against torch at
+- three single-file graphs with symbolic ``batch`` and ``time`` axes, ``(B, C, T)``:
+  ``style3d.onnx`` (``motion3d (B, 63, time) -> style_code (B, S)``), ``style2d.onnx``
+  (``motion2d (B, 32, time) -> style_code``) and ``restyler.onnx`` (``content (B, 193,
+  time)``, ``style_code`` -> ``output (B, 126, time)``), each checked against torch at
   :data:`PARITY_LENGTHS` x :data:`PARITY_BATCHES` (rtol :data:`RTOL`, atol :data:`ATOL`);
 - ``stats.npz``: the checkpoint's feature statistics (``motion.features.save_stats``);
-- ``styles.npz``: per style name (``names``) the mean 3D style code of its training clips
-  (``codes (N, S)``; whole clips padded to the stride, the checkpoint's validation takes left
-  out), the clip count (``clips``), the mean velocity factor of those clips (``velocity``,
-  ``motion.features.velocity_factor``) and the style's ``speed`` (:func:`style_speeds`),
-  the time warp of a named style;
-- ``split.json``: the validation takes, for the evaluation.
+- ``styles.npz``: per style (``names``) its named code (``codes``, trained with the
+  networks), the count of its Bandai takes (``clips``), their mean velocity factor
+  (``velocity``) and the style's ``speed`` against the other styles on the same actions
+  (:func:`style_speeds`), a named style's time warp;
 
-and one manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``) whose
-``extra`` repeats the style table (codes, clip counts, velocity factors, speeds) and the
-step.
-
-The TorchScript exporter (``dynamo=False``) is used: it keeps the named time axes symbolic
-and the graphs need nothing it lacks (convolutions, instance norm, nearest resize, amax).
+and the manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``).
+The checkpoint is read from a copy (a running training overwrites it).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import shutil
 import tempfile
 import warnings
@@ -43,75 +35,55 @@ import torch
 
 from model_export import manifest as MF
 from motion import features as Fe
-from training.translator.model import STRIDE, Translator, pad_time
+from training.translator.networks import RESTYLER_IN, NetworkConfig, Translator
 
 OPSET = 17
 MODEL_NAME = "translator-bandai"
 FOLDER = "translator"
-PARITY_LENGTHS = (32, 64, 99, 256)  # 99 is padded to the stride (100)
+PARITY_LENGTHS = (31, 64, 99, 256)
 PARITY_BATCHES = (1, 3)
 RTOL, ATOL = 1e-4, 5e-5
-TRAINING_DATA = ["Bandai-Namco-Research-Motiondataset 1 and 2 (CC BY-NC 4.0)"]
+TRAINING_DATA = [
+    "Bandai-Namco-Research-Motiondataset 1 and 2 (CC BY-NC 4.0)",
+    "Dance with Melody (Tang et al. 2018; research only), as unstyled motion",
+]
 LICENCE = (
     "research and evaluation only: trained on Bandai Namco Research Motion dataset, CC BY-NC 4.0"
 )
-GRAPH_NAMES = ("content_encoder", "style3d", "style2d", "decoder")
+GRAPH_NAMES = ("style3d", "style2d", "restyler")
 
 
-def graph_io(g: Translator) -> dict[str, tuple[list, list]]:
+def graph_io(net: Translator) -> dict[str, tuple[list, list]]:
     """Per graph ``(inputs, outputs)`` as ``(name, shape)`` pairs (symbolic dims as names)."""
-    cfg = g.cfg
-    code = cfg.content_channels[-1]
-    code_shape = ["batch", code, "code_time"]
-    style = [("style_code", ["batch", cfg.style_dim])]
+    style = [("style_code", ["batch", net.cfg.style_dim])]
     return {
-        "content_encoder": ([("content", ["batch", cfg.content_in, "time"])], [("code", code_shape)]),
-        "style3d": ([("motion3d", ["batch", cfg.style3d_in, "time"])], style),
-        "style2d": ([("motion2d", ["batch", cfg.style2d_in, "time"])], style),
-        "decoder": ([("code", code_shape), *style], [("output", ["batch", cfg.output, "time"])]),
-    }  # fmt: skip
+        "style3d": ([("motion3d", ["batch", Fe.STYLE3D_CHANNELS, "time"])], style),
+        "style2d": ([("motion2d", ["batch", Fe.STYLE2D_CHANNELS, "time"])], style),
+        "restyler": (
+            [("content", ["batch", RESTYLER_IN, "time"]), *style],
+            [("output", ["batch", Fe.OUTPUT_CHANNELS, "time"])],
+        ),
+    }
 
 
-def receptive_field(cfg) -> int:
-    """Frames of content input that one output frame of ``decoder(content_encoder(x))`` sees
-    through its convolutions (instance norm aside, which sees the whole clip)."""
-    k, rf, jump = cfg.kernel, 1, 1
-    rf += (k - 1) * jump  # first
-    for _ in range(cfg.content_down):  # kernel 4, stride 2
-        rf += 3 * jump
-        jump *= 2
-    rf += 2 * cfg.content_resblocks * (k - 1) * jump
-    rf += 2 * cfg.decoder_resblocks * (k - 1) * jump
-    for _ in range(cfg.content_down):  # nearest x2, then a convolution
-        jump //= 2
-        rf += 1 + (k - 1) * jump
-    return rf + (k - 1) * jump  # last
-
-
-def _example_inputs(g: Translator, graph: str, batch: int, frames: int, gen=None) -> tuple:
-    """Standard-normal inputs of ``graph`` for ``frames`` frames (a multiple of STRIDE)."""
-    cfg = g.cfg
-
+def example_inputs(net: Translator, graph: str, batch: int, frames: int, gen=None) -> tuple:
     def randn(*shape):
         return torch.randn(*shape, generator=gen)
 
-    if graph == "content_encoder":
-        return (randn(batch, cfg.content_in, frames),)
     if graph == "style3d":
-        return (randn(batch, cfg.style3d_in, frames),)
+        return (randn(batch, Fe.STYLE3D_CHANNELS, frames),)
     if graph == "style2d":
-        return (randn(batch, cfg.style2d_in, frames),)
+        return (randn(batch, Fe.STYLE2D_CHANNELS, frames),)
     with torch.no_grad():
-        code = g.content_encoder(randn(batch, cfg.content_in, frames))
-        style = g.style3d(randn(batch, cfg.style3d_in, frames))
-    return code, style
+        code = net.style3d(randn(batch, Fe.STYLE3D_CHANNELS, frames))
+    return randn(batch, RESTYLER_IN, frames), code
 
 
-def export_graphs(g: Translator, out_dir: Path) -> dict[str, Path]:
-    """The four graphs of ``g`` as ``out_dir/<graph>.onnx`` (single files, symbolic axes)."""
-    g.eval()
+def export_graphs(net: Translator, out_dir: Path) -> dict[str, Path]:
+    """The graphs of ``net`` as ``out_dir/<graph>.onnx`` (single files, symbolic axes)."""
+    net.eval()
     out_dir.mkdir(parents=True, exist_ok=True)
-    io = graph_io(g)
+    io = graph_io(net)
     paths = {}
     for graph in GRAPH_NAMES:
         inputs, outputs = io[graph]
@@ -123,8 +95,8 @@ def export_graphs(g: Translator, out_dir: Path) -> dict[str, Path]:
         with warnings.catch_warnings(), torch.no_grad():
             warnings.simplefilter("ignore")
             torch.onnx.export(
-                getattr(g, graph),
-                _example_inputs(g, graph, 1, 64),
+                getattr(net, graph),
+                example_inputs(net, graph, 1, 64),
                 str(path),
                 dynamo=False,
                 opset_version=OPSET,
@@ -158,7 +130,7 @@ def check_symbolic(path: Path, inputs: list, outputs: list) -> None:
 
 
 def parity(
-    g: Translator,
+    net: Translator,
     paths: dict[str, Path],
     lengths: Iterable[int] = PARITY_LENGTHS,
     batches: Iterable[int] = PARITY_BATCHES,
@@ -166,27 +138,22 @@ def parity(
     atol: float = ATOL,
     seed: int = 0,
 ) -> dict[str, dict[str, float]]:
-    """Torch vs onnxruntime for every graph at every length (padded to STRIDE) and batch:
-    ``{graph: {"max_abs", "max_rel"}}``; raises ``RuntimeError`` when an element is
-    outside ``rtol``/``atol``."""
+    """Torch against onnxruntime for every graph at every length and batch: ``{graph:
+    {"max_abs", "max_rel"}}``; ``RuntimeError`` when an element is outside rtol/atol."""
     import onnxruntime as ort
 
     gen = torch.Generator().manual_seed(seed)
-    g.eval()
+    net.eval()
     out: dict[str, dict[str, float]] = {}
     for graph, path in paths.items():
         session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
         names = [i.name for i in session.get_inputs()]
         worst_abs = worst_rel = 0.0
         for frames in lengths:
-            padded = frames + (-frames) % STRIDE
             for batch in batches:
-                if graph == "decoder":  # the code of a padded clip: T / 2 steps
-                    x = _example_inputs(g, graph, batch, padded, gen)
-                else:
-                    x = (pad_time(_example_inputs(g, graph, batch, frames, gen)[0]),)
+                x = example_inputs(net, graph, batch, frames, gen)
                 with torch.no_grad():
-                    want = getattr(g, graph)(*x).numpy()
+                    want = getattr(net, graph)(*x).numpy()
                 got = session.run(None, dict(zip(names, (t.numpy() for t in x), strict=True)))[0]
                 if got.shape != want.shape or not np.allclose(got, want, rtol=rtol, atol=atol):
                     diff = np.abs(got - want).max() if got.shape == want.shape else float("nan")
@@ -205,32 +172,24 @@ def parity(
 
 
 def clip_code(style3d_net, style3d: np.ndarray, stats: Fe.FeatureStats) -> np.ndarray:
-    """3D style code ``(S,)`` of a whole clip's raw style3d features ``(F, 63)`` (padded to
-    the stride by repeating the last frame), ``style3d_net`` a torch module or a callable
-    on a ``(1, 63, T)`` float32 array."""
-    x = Fe.pad_frames(Fe.standardize(style3d, stats, "style3d"), STRIDE).T[None]
-    if isinstance(style3d_net, torch.nn.Module):
-        with torch.no_grad():
-            return style3d_net(torch.from_numpy(np.ascontiguousarray(x))).numpy()[0]
-    return np.asarray(style3d_net(np.ascontiguousarray(x)))[0]
+    """3D style code ``(S,)`` of a whole clip's raw style3d features ``(F, 63)``."""
+    x = torch.from_numpy(np.ascontiguousarray(Fe.standardize(style3d, stats, "style3d").T[None]))
+    with torch.no_grad():
+        return style3d_net(x).numpy()[0]
 
 
 def style_speeds(velocity: dict[tuple[str, str], list[float]]) -> dict[str, float]:
-    """How fast each style moves against the others *on the same content*: per content,
-    the log of a style's mean velocity factor minus the mean of that over the content's
-    styles; a style's speed is the exp of its mean over its contents (contents with one
-    style say nothing and are skipped; a style with none gets 1).
-
-    A style's plain mean velocity factor mixes its contents: runs are fast and bows slow,
-    so warping by it slowed every run and sped up every bow, whatever the style.
-    ``velocity``: ``(content, style) -> velocity factors``.
-    """
+    """How fast each style moves against the others *on the same action*: per action, the
+    log of a style's mean velocity factor minus the mean of that over the action's styles;
+    a style's speed is the exp of its mean over its actions (an action with one style says
+    nothing; a style with none gets 1). A style's plain mean velocity factor would mix its
+    actions (runs are fast, bows slow). ``velocity``: ``(action, style) -> factors``."""
     logs = {k: float(np.log(np.mean(v))) for k, v in velocity.items() if np.mean(v) > 1e-6}
-    by_content: dict[str, dict[str, float]] = {}
-    for (content, style), value in logs.items():
-        by_content.setdefault(content, {})[style] = value
+    by_action: dict[str, dict[str, float]] = {}
+    for (action, style), value in logs.items():
+        by_action.setdefault(action, {})[style] = value
     offsets: dict[str, list[float]] = {}
-    for per_style in by_content.values():
+    for per_style in by_action.values():
         if len(per_style) < 2:
             continue
         mean = float(np.mean(list(per_style.values())))
@@ -240,123 +199,95 @@ def style_speeds(velocity: dict[tuple[str, str], list[float]]) -> dict[str, floa
     return {s: float(np.exp(np.mean(offsets[s]))) if s in offsets else 1.0 for s in styles}
 
 
-def style_table(
-    style3d_net, stats: Fe.FeatureStats, clips: list, styles: list[str], val_takes: Iterable[str]
-) -> dict:
-    """Mean code, clip count, mean velocity factor and speed (:func:`style_speeds`) per
-    style over the training clips (those whose take is not in ``val_takes``), and the
-    validation clips' nearest-style accuracy (top 1 and top 3, by Euclidean distance to
-    the means).
+def style_table(net: Translator, stats: Fe.FeatureStats, clips: list, styles: list[str]) -> dict:
+    """Per (merged) style: its named code (trained with the networks), the count of its
+    takes among ``clips`` (``training.data.Clip`` with ``style``, ``content`` and
+    ``motion``), their mean velocity factor and the style's speed; and how often a take's
+    own 3D code lies nearest its style's named code (``nearest_top1``)."""
+    from motion.styles import canonical_style
 
-    ``clips``: ``training.data.Clip`` objects with ``style``, ``content``, ``take`` and
-    ``motion``.
-    """
-    held_out = set(val_takes)
     codes: dict[str, list[np.ndarray]] = {s: [] for s in styles}
     velocity: dict[str, list[float]] = {s: [] for s in styles}
-    by_content: dict[tuple[str, str], list[float]] = {}
-    val: list[tuple[str, np.ndarray]] = []
+    by_action: dict[tuple[str, str], list[float]] = {}
     for clip in clips:
-        if clip.style not in codes:
-            continue
-        motion = clip.motion
-        enc = Fe.encode(motion)
-        code = clip_code(style3d_net, enc.style3d, stats)
-        if clip.take in held_out:
-            val.append((clip.style, code))
-            continue
-        codes[clip.style].append(code)
-        velocity[clip.style].append(Fe.velocity_factor(motion))
-        by_content.setdefault((clip.content, clip.style), []).append(velocity[clip.style][-1])
-    names = [s for s in styles if codes[s]]
-    speeds = style_speeds(by_content)
-    table = {
-        "names": names,
-        "codes": np.stack([np.mean(codes[s], axis=0) for s in names]).astype(np.float32),
-        "clips": np.array([len(codes[s]) for s in names], dtype=np.int64),
-        "velocity": np.array([np.mean(velocity[s]) for s in names], dtype=np.float64),
-        "speed": np.array([speeds[s] for s in names], dtype=np.float64),
+        style = canonical_style(clip.style)
+        enc = Fe.encode(clip.motion)
+        codes[style].append(clip_code(net.style3d, enc.style3d, stats))
+        velocity[style].append(Fe.encoded_velocity_factor(enc))
+        by_action.setdefault((clip.content, style), []).append(velocity[style][-1])
+    speeds = style_speeds(by_action)
+    named = net.named.weight.detach().numpy().astype(np.float32)
+    hits = [
+        int(np.argmin(np.linalg.norm(named - code, axis=1))) == k
+        for k, s in enumerate(styles)
+        for code in codes[s]
+    ]
+    return {
+        "names": list(styles),
+        "codes": named,
+        "nearest_top1": np.array(np.mean(hits)),
+        "clips": np.array([len(codes[s]) for s in styles], dtype=np.int64),
+        "velocity": np.array([np.mean(velocity[s]) for s in styles], dtype=np.float64),
+        "speed": np.array([speeds[s] for s in styles], dtype=np.float64),
     }
-    hits1 = hits3 = 0
-    for style, code in val:
-        order = np.argsort(np.linalg.norm(table["codes"] - code, axis=1))
-        ranked = [names[i] for i in order[:3]]
-        hits1 += ranked[0] == style
-        hits3 += style in ranked
-    table["val_clips"] = len(val)
-    table["val_top1"] = hits1 / len(val) if val else None
-    table["val_top3"] = hits3 / len(val) if val else None
-    return table
 
 
 # --------------------------------------------------------------------------- main
 
 
-def load_checkpoint_copy(path: Path) -> tuple[Translator, Fe.FeatureStats, dict]:
-    """The generator, statistics and metadata of a COPY of ``path`` (``metrics`` and the
-    checkpoint's modification time added to the metadata)."""
-    from training.translator.train import load_translator
-
+def load_checkpoint(path: Path) -> tuple[Translator, Fe.FeatureStats, dict]:
+    """The networks, statistics and saved metadata of a copy of ``path``."""
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / "translator.pt"
         shutil.copy2(path, copy)
-        g, stats, meta = load_translator(copy)
-        ckpt = torch.load(copy, map_location="cpu", weights_only=False)
-        meta["metrics"] = ckpt.get("metrics") or {}
-        meta["mtime"] = copy.stat().st_mtime
-    return g, stats, meta
+        payload = torch.load(copy, map_location="cpu", weights_only=False)
+        payload["mtime"] = copy.stat().st_mtime
+    net = Translator(NetworkConfig(**payload["network"]))
+    net.load_state_dict(payload["weights"])
+    net.eval()
+    arrays = {k: v.numpy() for k, v in payload["stats"].items()}
+    kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
+    stats = Fe.FeatureStats({k: arrays[f"{k}_mean"] for k in kinds},
+                            {k: arrays[f"{k}_std"] for k in kinds})  # fmt: skip
+    return net, stats, payload
 
 
 def main(argv: list[str] | None = None) -> dict:
     from training import data as D
-    from training.translator.train import DEFAULT_CHECKPOINT
+    from training.translator.fit import REPO
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--checkpoint", type=Path, default=DEFAULT_CHECKPOINT)
+    p.add_argument("--checkpoint", type=Path, default=REPO / "checkpoints" / "translator.pt")
     p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
 
-    g, stats, meta = load_checkpoint_copy(args.checkpoint)
-    step = int(meta["step"])
+    net, stats, payload = load_checkpoint(args.checkpoint)
+    step = int(payload["step"])
     models_dir = Path(args.models_dir)
     out = models_dir / FOLDER
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
 
-    paths = export_graphs(g, out)
-    parity_figures = parity(g, paths)
+    paths = export_graphs(net, out)
+    parity_figures = parity(net, paths)
     for graph, fig in parity_figures.items():
         print(f"{graph}: parity max abs {fig['max_abs']:.2e}, max rel {fig['max_rel']:.2e}")
 
     Fe.save_stats(out / "stats.npz", stats)
-    clips = D.load_bandai(datasets=tuple(meta["train_config"]["datasets"]))
-    table = style_table(g.style3d, stats, clips, meta["styles"], meta["val_takes"])
-    np.savez(
-        out / "styles.npz",
-        names=np.array(table["names"]),
-        codes=table["codes"],
-        clips=table["clips"],
-        velocity=table["velocity"],
-        speed=table["speed"],
-    )
-    split = {"val_takes": list(meta["val_takes"]), "styles": list(meta["styles"]), "step": step}
-    (out / "split.json").write_text(json.dumps(split, indent=1) + "\n")
-    print(
-        f"style table: {len(table['names'])} styles; held-out clips nearest style top-1 "
-        f"{table['val_top1']:.3f}, top-3 {table['val_top3']:.3f} ({table['val_clips']} clips)"
-    )
+    table = style_table(net, stats, D.load_bandai(), payload["styles"])
+    print(f"a take's own code is nearest its style's: {float(table['nearest_top1']):.1%}")
+    np.savez(out / "styles.npz", **{k: np.asarray(v) for k, v in table.items()})
 
-    io = graph_io(g)
+    io = graph_io(net)
     files = [f"{FOLDER}/{p.name}" for p in paths.values()]
-    files += [f"{FOLDER}/stats.npz", f"{FOLDER}/styles.npz", f"{FOLDER}/split.json"]
+    files += [f"{FOLDER}/stats.npz", f"{FOLDER}/styles.npz"]
     graphs = {
         graph: MF.graph_spec(f"{FOLDER}/{paths[graph].name}", OPSET, *io[graph])
         for graph in GRAPH_NAMES
     }
-    cfg = g.cfg
     styles = {
         name: {
             "clips": int(table["clips"][i]),
@@ -366,42 +297,35 @@ def main(argv: list[str] | None = None) -> dict:
         }
         for i, name in enumerate(table["names"])
     }
-    metrics = {k: round(float(v), 5) for k, v in meta["metrics"].items()}
-    metrics |= {
-        "val_clip_style_top1": round(table["val_top1"], 4),
-        "val_clip_style_top3": round(table["val_top3"], 4),
-        "val_clips": table["val_clips"],
-        "parity": parity_figures,
-        "parity_lengths": list(PARITY_LENGTHS),
-        "parity_batches": list(PARITY_BATCHES),
-        "parity_rtol": RTOL,
-        "parity_atol": ATOL,
-    }
-    trained_at = dt.datetime.fromtimestamp(meta["mtime"], dt.UTC).isoformat(timespec="seconds")
+    trained_at = dt.datetime.fromtimestamp(payload["mtime"], dt.UTC).isoformat(timespec="seconds")
     entry = {
         "name": MODEL_NAME,
         "family": "translator",
-        "version": f"0.1.{step}",
+        "version": f"0.2.{step}",
         "files": files,
         "graphs": graphs,
         "training_data": TRAINING_DATA,
         "licence": LICENCE,
         "trained_at": trained_at,
-        "metrics": metrics,
+        "metrics": {
+            "takes_nearest_own_style": round(float(table["nearest_top1"]), 4),
+            "parity": parity_figures,
+            "parity_lengths": list(PARITY_LENGTHS),
+            "parity_batches": list(PARITY_BATCHES),
+            "parity_rtol": RTOL,
+            "parity_atol": ATOL,
+        },
         "extra": {
-            "paper": "aberman2020 unpaired motion style transfer from video",
+            "paper": "aberman2020 (style codes from clips and video), trained on aligned pairs",
             "step": step,
             "stats": f"{FOLDER}/stats.npz",
             "styles_file": f"{FOLDER}/styles.npz",
-            "split": f"{FOLDER}/split.json",
-            "validation_takes": len(meta["val_takes"]),
-            "stride": STRIDE,
-            "receptive_field": receptive_field(cfg),
-            "window": int(meta["train_config"]["window"]),
+            "window": int(payload["train"]["window"]),
+            "receptive_field": net.cfg.receptive_field,
             "fps": Fe.FPS,
-            "style_dim": cfg.style_dim,
-            "code_channels": cfg.content_channels[-1],
-            "model_config": cfg.to_dict(),
+            "style_dim": net.cfg.style_dim,
+            "network": net.cfg.to_dict(),
+            "aliases": dict(payload["aliases"]),
             "styles": styles,
         },
     }

@@ -20,8 +20,9 @@ Encodings (channel counts in the constants below):
   quaternions still depend on where a window starts, and canonical ``w >= 0`` ones jump
   near 180 degrees; 6D is unique and continuous (Zhou et al. 2019), decoded by
   Gram-Schmidt.
-- output ``(F, OUTPUT_CHANNELS)``: the rotation part of the content encoding (the network
-  writes rotations only; the root trajectory is the content's, as in the paper).
+- output ``(F, OUTPUT_CHANNELS)``: the rotations and the hips height of the content
+  encoding (the network writes the pose and how high it carries the hips; where the body
+  travels is the content's).
 - 3D style ``(F, STYLE3D_CHANNELS)``: the body joints' positions relative to the root on
   the floor, in the facing frame (``kinematics.root_local``).
 - 2D style ``(F, STYLE2D_CHANNELS)``: the joints a pose detector observes
@@ -62,7 +63,7 @@ FACING_SMOOTH = 2.0
 ROTATION_CHANNELS = 6 * len(BODY)
 ROOT_CHANNELS = 4  # hips height, velocity sideways, velocity forward, turning velocity
 CONTENT_CHANNELS = ROTATION_CHANNELS + ROOT_CHANNELS
-OUTPUT_CHANNELS = ROTATION_CHANNELS
+OUTPUT_CHANNELS = ROTATION_CHANNELS + 1  # and the hips height
 STYLE3D_CHANNELS = 3 * len(BODY)
 
 # Observed by OpenPose BODY_25 (see motion.keypoints); Hips is the per-frame origin.
@@ -79,7 +80,7 @@ STYLE2D_CHANNELS = 2 * len(STYLE2D_JOINTS)
 _OBSERVED_2D = np.zeros(len(C.JOINTS), dtype=bool)
 _OBSERVED_2D[[HIPS, *STYLE2D_JOINTS]] = True
 
-KINDS = ("content", "style3d", "style2d")
+KINDS = ("content", "style3d", "style2d", "control")
 
 
 def facing(gpos: np.ndarray) -> np.ndarray:
@@ -208,11 +209,13 @@ def rotations_from_output(output: np.ndarray, face: np.ndarray) -> np.ndarray:
 
 
 def decode_motion(output: np.ndarray, content: Motion, face: np.ndarray | None = None) -> Motion:
-    """A canonical motion with the network's rotations and the content's root trajectory.
+    """A canonical motion with the network's rotations and hips height on the content's
+    root trajectory.
 
-    ``output (F, OUTPUT_CHANNELS)`` unstandardised, frame-aligned with ``content``; ``face``
-    the content's facing rotations (recomputed when None). The content's joint_Root
-    rotation and all translations are kept.
+    ``output (F, OUTPUT_CHANNELS)`` unstandardised, frame-aligned with ``content`` (without
+    its last channel, the hips height, the content's is kept); ``face`` the content's
+    facing rotations (recomputed when None). The content's joint_Root rotation and the
+    hips' travel over the floor are kept.
     """
     C.check_motion(content, "translator features")
     if len(output) != content.num_frames:
@@ -223,7 +226,13 @@ def decode_motion(output: np.ndarray, content: Motion, face: np.ndarray | None =
     root = content.lrot[:, ROOT]
     lrot[:, ROOT] = root
     lrot[:, HIPS] = rot.mul(rot.inv(root), lrot[:, HIPS])
-    return content.replace(lrot=lrot, lpos=content.lpos.copy())
+    lpos = content.lpos.copy()
+    if output.shape[1] > ROTATION_CHANNELS:  # the hips height, in the root's frame
+        hips = content.lpos[:, ROOT] + rot.apply(root, content.lpos[:, HIPS])
+        lift = np.zeros_like(hips)
+        lift[:, 1] = output[:, ROTATION_CHANNELS] * LEG - hips[:, 1]
+        lpos[:, HIPS] += rot.apply(rot.inv(root), lift)
+    return content.replace(lrot=lrot, lpos=lpos)
 
 
 # --------------------------------------------------------------------------- statistics
@@ -281,6 +290,38 @@ def load_stats(path: str | Path) -> FeatureStats:
     with np.load(path) as z:
         kinds = [k[: -len("_mean")] for k in z.files if k.endswith("_mean")]
         return FeatureStats({k: z[f"{k}_mean"] for k in kinds}, {k: z[f"{k}_std"] for k in kinds})
+
+
+# --------------------------------------------------------------------------- restyler input
+
+# What the translator's restyler reads of the content: the paths of the head, hands, feet
+# and toes about the hips, and how the body travels. The rest of the pose (spine, elbows,
+# knees, how the joints are held) it writes from the style code.
+CONTROL_JOINTS = tuple(
+    int(np.flatnonzero(BODY == C.INDEX[n])[0])
+    for n in ("Head", "Hand_L", "Hand_R", "Foot_L", "Foot_R", "Toes_L", "Toes_R")
+)  # indices among BODY, i.e. among the 21 joints of the style3d encoding
+CONTROL_CHANNELS = 3 * len(CONTROL_JOINTS) + ROOT_CHANNELS
+
+
+def control_features(content: np.ndarray, style3d: np.ndarray) -> np.ndarray:
+    """``(F, CONTROL_CHANNELS)`` float32 of one whole clip's content and 3D style encodings:
+    the control joints relative to the hips (facing frame, leg lengths), then the root
+    channels (hips height, velocity sideways and forward, turning). Positions and hips
+    height are taken relative to their mean over the clip: the posture is the style's to
+    choose, the movement about it is the content's."""
+    pos = np.asarray(style3d, dtype=np.float32).reshape(len(style3d), -1, 3)
+    rel = (pos[:, CONTROL_JOINTS] - pos[:, :1]).reshape(len(pos), -1)
+    root = np.array(content[:, ROTATION_CHANNELS:], dtype=np.float32)
+    x = np.concatenate([rel - rel.mean(axis=0), root], axis=1)
+    x[:, -ROOT_CHANNELS] -= x[:, -ROOT_CHANNELS].mean()
+    return x.astype(np.float32)
+
+
+def restyler_input(content: np.ndarray, style3d: np.ndarray, stats: FeatureStats) -> np.ndarray:
+    """The restyler's input ``(F, CONTROL_CHANNELS)``: :func:`control_features`
+    standardised (kind ``control``)."""
+    return standardize(control_features(content, style3d), stats, "control")
 
 
 # --------------------------------------------------------------------------- time

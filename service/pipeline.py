@@ -23,6 +23,7 @@ not a JSON object of names a 400; ``format=glb`` without a glTF file to write in
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from dataclasses import dataclass, field
@@ -35,6 +36,7 @@ from fastapi.responses import JSONResponse, Response
 from motion import bvh, gltf, retarget
 from motion import canonical as C
 from motion.errors import MotionError
+from motion.features import time_warp
 from motion.skeleton import Motion
 from service import limits, metrics
 from service.config import Settings
@@ -284,13 +286,21 @@ def write_result(
     fps: float | None = None,
     like_clip: bool = True,
     fmt: str | None = None,
+    warp: float = 1.0,
 ) -> Result:
     """The canonical result back on the clip's own skeleton (its names, offsets, channels
-    and, with ``like_clip``, frame rate, frame for frame with ``clip.original``; else at the
-    canonical motion's timing), or left canonical without a clip; at ``fps`` when given;
-    413 over ``max_frames``. Written in ``clip.answer`` (the format ``fmt`` for no clip):
-    BVH text, or the clip's glTF file with the result as its animation."""
+    and, with ``like_clip``, frame rate, frame for frame with ``clip.original``, played
+    ``warp`` times as fast as sent when the result was time-warped, so that the joints the
+    canonical skeleton lacks follow the new timing; else at the canonical motion's timing),
+    or left canonical without a clip; at ``fps`` when given; 413 over ``max_frames``.
+    Written in ``clip.answer`` (the format ``fmt`` for no clip): BVH text, or the clip's
+    glTF file with the result as its animation."""
     answer = clip.answer if clip is not None else answer_format(None, fmt)
+    if clip is not None and warp != 1.0:
+        with timer.stage("time_warp"):
+            original = time_warp(clip.original, warp)
+        limits.check_frames(original, settings, what="result")
+        clip = dataclasses.replace(clip, original=original)
     if clip is not None:
         with timer.stage("retarget_back"):
             out = retarget.from_canonical(

@@ -21,7 +21,7 @@ a beat). Parts:
   alignment against the same tracker's beats, and the warp's share (no warp);
 - **ten minutes**: the held-out songs' music looped to 10 minutes, one generation per seed:
   stalls, mean joint speed per 30 s;
-- **genre**: a classifier of dance motion (``training.eval_style.ClipClassifier`` on
+- **genre**: a classifier of dance motion (``training.judges.ClipClassifier`` on
   :func:`genre_features`, relative to the hips' floor point) trained on the real dances of
   the training songs names the genre of dances generated for the held-out songs with each
   of the four genres requested;
@@ -193,7 +193,7 @@ def held_out_songs():
 
 def floor_rooted(motion: Motion) -> Motion:
     """The same motion with its root joint following the hips on the floor. Canonical dances
-    keep ``joint_Root`` at the origin, so ``eval_style.window_features`` (positions relative
+    keep ``joint_Root`` at the origin, so ``judges.window_features`` (positions relative
     to the root) would describe where on the floor the dancer has wandered; relative to the
     hips' floor point they describe the dance."""
     lpos = motion.lpos.copy()
@@ -206,7 +206,7 @@ def floor_rooted(motion: Motion) -> Motion:
 def genre_features(motion: Motion) -> np.ndarray:
     """Window statistics of a dance for the genre classifier (``window_features`` of
     :func:`floor_rooted`)."""
-    from training.eval_style import window_features
+    from training.judges import window_features
 
     return window_features(floor_rooted(motion))
 
@@ -215,7 +215,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats),
     genre recognition of every requested genre, foot sliding."""
     from service.metrics import StageTimer
-    from training.eval_style import ClipClassifier
+    from training.judges import ClipClassifier
 
     held, train = held_out_songs()
     genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])

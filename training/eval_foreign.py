@@ -5,7 +5,7 @@
 
 writes ``foreign-<half>.json`` for each half judged (default ``runs/eval/``) and prints its
 tables; ``--manifest`` records the test half's figures in each model's manifest entry
-(``metrics.evaluation.foreign_test_half``, beside ``eval_style``'s).
+(``metrics.evaluation.foreign_test_half``).
 
 Content: the shared CMU 31-joint takes, Xia's clips and the CMU dance takes (43-joint and
 3ds Max layouts; 05_20, in both CMU folders, once), canonical at 30 fps through
@@ -25,7 +25,7 @@ the alternation running on across folders so that odd counts balance; variants a
 the first two CMU-31 and two Xia takes of each half in that order. The report says its
 half; nothing here reads the test half to choose anything.
 
-Style judge: the convolutional window classifier of ``training.eval_style``
+Style judge: the convolutional window classifier of ``training.judges``
 (``ConvClipClassifier``, three seeds, one thread) on every real Bandai take and its mirror
 image, with the 16 merged style names (``motion.styles``); a clip's distribution is its
 windows' mean log-probability, so top-3 is read from it. Its reference ("real clips") is
@@ -51,7 +51,7 @@ spread: the same between per-style mean descriptors of real Bandai takes of one 
 (one dataset, one content label), averaged over actions. Content kept: hands and feet
 relative to the hips in the body's facing frame, the output resampled to the content's
 frame count (time warping changes it), centred 3D correlation per effector, averaged; the
-mean and the share at or above 0.85. Foot sliding as ``eval_style.skating``, beside real
+mean and the share at or above 0.85. Foot sliding as ``judges.skating``, beside real
 Bandai mocap and the content unchanged. Baseline: what the judge says of the content
 unchanged.
 """
@@ -76,7 +76,7 @@ from motion import kinematics as K
 from motion import rotations as rot
 from motion.skeleton import Motion
 from motion.styles import canonical_style
-from training.eval_style import (
+from training.judges import (
     ConvClipClassifier,
     classifier_code_key,
     frame_features,

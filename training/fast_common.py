@@ -1,5 +1,5 @@
 """What the fast style networks' training scripts share (holden2017): data as encoded
-clips, window sampling, the two networks and the torch side of the losses.
+clips, window sampling, the two networks and the bone-length loss.
 
 Networks read and write standardised features ``(batch, time, CHANNELS)``
 (``motion.fast_features``); inside they work on ``(batch, channels, time)``.
@@ -216,14 +216,8 @@ def receptive_field() -> int:
 # --------------------------------------------------------------------------- losses
 
 
-def gram(h: torch.Tensor) -> torch.Tensor:
-    """Gram matrices ``(B, H, H)`` of hidden units ``(B, H, T)``, averaged over time
-    (paper eq. 6 sums; the mean makes windows of any length comparable)."""
-    return h @ h.transpose(1, 2) / h.shape[-1]
-
-
 class Physics(nn.Module):
-    """Raw-feature quantities for the constraint losses, from standardised features."""
+    """Raw features from standardised ones, and the bone-length constraint on them."""
 
     def __init__(self, mean: np.ndarray, std: np.ndarray):
         super().__init__()
@@ -232,7 +226,6 @@ class Physics(nn.Module):
         child, parent, length = FF.bone_pairs()
         self.child, self.parent = child.tolist(), parent.tolist()
         self.register_buffer("length", torch.tensor(length))
-        self.feet = [j - 1 for j in FF.FOOT_JOINTS]  # indices among the 21 body joints
 
     def raw(self, z: torch.Tensor) -> torch.Tensor:
         return z * self.std + self.mean
@@ -246,22 +239,6 @@ class Physics(nn.Module):
         p = self.positions(raw)
         lengths = (p[..., self.child, :] - p[..., self.parent, :]).norm(dim=-1)
         return ((lengths - self.length) ** 2).mean()
-
-    def foot_loss(self, raw: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
-        """Paper eq. 7: horizontal world velocity (leg lengths per second) of each foot joint
-        while ``contacts (B, T, 4)`` says it is planted. The step from t to t + 1 seen in
-        frame t's facing frame: ``R_y(turn / fps) p(t+1) - p(t) + v(t) / fps``."""
-        p = self.positions(raw)[..., self.feet, :]  # (B, T, 4, 3)
-        vel = raw[..., FF.VELOCITY]
-        angle = raw[..., FF.TURN] / FF.FPS
-        c, s = torch.cos(angle[:, :-1, None]), torch.sin(angle[:, :-1, None])
-        nxt = p[:, 1:]
-        x = c * nxt[..., 0] + s * nxt[..., 2]
-        z = -s * nxt[..., 0] + c * nxt[..., 2]
-        dx = (x - p[:, :-1, :, 0]) * FF.FPS + vel[:, :-1, None, 0]
-        dz = (z - p[:, :-1, :, 2]) * FF.FPS + vel[:, :-1, None, 1]
-        planted = (contacts[:, 1:] * contacts[:, :-1]).float()
-        return ((dx**2 + dz**2) * planted).sum() / planted.sum().clamp_min(1.0)
 
 
 # --------------------------------------------------------------------------- logging

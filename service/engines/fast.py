@@ -19,11 +19,13 @@ import numpy as np
 
 from motion import canonical as C
 from motion import fast_features as FF
+from motion import features as Fe
 from motion import fit, ik
 from motion import kinematics as K
 from motion.skeleton import Motion
 from service.engines import register_engine
 from service.engines.base import Engine
+from service.engines.translator import MAX_WARP, MIN_WARP
 from service.errors import NotFound
 from service.metrics import StageTimer
 from service.pipeline import Clip, Result, Upload, load_clip, write_result
@@ -44,6 +46,7 @@ class StylizeRequest:
     content: Upload
     style_name: str
     foot_cleanup: bool = True
+    time_warp: bool = True
     mapping: dict[str, str] | None = None
     format: str | None = None  # of the answer; None: the content's
 
@@ -59,6 +62,7 @@ class FastJob:
     features: FF.Encoded
     x: np.ndarray
     foot_cleanup: bool
+    time_warp: bool = False
 
 
 class FastEngine(Engine):
@@ -73,15 +77,27 @@ class FastEngine(Engine):
             name: info for name, info in extra.get("styles", {}).items()
             if info["graph"] in self.sessions
         }  # fmt: skip
+        # other names of a style (Bandai's two datasets name three styles twice)
+        self.aliases = {a: n for a, n in extra.get("aliases", {}).items() if n in self.style_info}
 
     def styles(self) -> list[dict[str, Any]]:
         return [
-            {"name": name, "clips": info.get("clips"), "contents": info.get("contents", [])}
+            {
+                "name": name,
+                "also_named": sorted(a for a, n in self.aliases.items() if n == name),
+                "clips": info.get("clips"),
+                "speed": info.get("speed"),
+            }
             for name, info in sorted(self.style_info.items())
         ]
 
+    def style_of(self, name: str) -> str | None:
+        """The style ``name`` is, or is another name of; None if none."""
+        name = self.aliases.get(name, name)
+        return name if name in self.style_info else None
+
     def accepts(self, request: StylizeRequest) -> bool:
-        return request.style_name in self.style_info
+        return self.style_of(request.style_name) is not None
 
     def refusal(self, request: StylizeRequest) -> NotFound:
         return NotFound(
@@ -96,7 +112,9 @@ class FastEngine(Engine):
         clip = load_clip(
             request.content, self.settings, timer, mapping=request.mapping, answer=request.format
         )
-        return self._job(clip.canonical, request.style_name, request.foot_cleanup, timer, clip)
+        job = self._job(clip.canonical, request.style_name, request.foot_cleanup, timer, clip)
+        job.time_warp = request.time_warp
+        return job
 
     def _job(
         self,
@@ -106,8 +124,9 @@ class FastEngine(Engine):
         timer: StageTimer,
         clip: Clip | None = None,
     ) -> FastJob:
-        if style not in self.style_info:
+        if self.style_of(style) is None:
             raise self.refusal(StylizeRequest(Upload("content"), style))
+        style = self.style_of(style)
         with timer.stage("features"):
             features = FF.encode(canon)
             z = self.stats.normalize(features.features)
@@ -124,7 +143,18 @@ class FastEngine(Engine):
 
     def finish(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Result:
         motion = self._motion(job, projected, timer)
-        return write_result(job.clip, motion, self.settings, timer, suffix=job.style)
+        factor = self.warp_factor(job.style) if job.time_warp else 1.0
+        if factor != 1.0:
+            with timer.stage("time_warp"):
+                motion = Fe.time_warp(motion, factor)
+        return write_result(job.clip, motion, self.settings, timer, suffix=job.style, warp=factor)
+
+    def warp_factor(self, style: str) -> float:
+        """How much faster than the content a style plays: its speed against the other
+        styles on the same actions (the translator's), clamped to [MIN_WARP, MAX_WARP];
+        1 for a bundle that gives none."""
+        speed = float(self.style_info[style].get("speed") or 1.0)
+        return min(max(speed, MIN_WARP), MAX_WARP)
 
     def _motion(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Motion:
         """The network's features -> a canonical motion: the content's root trajectory,
@@ -150,12 +180,16 @@ class FastEngine(Engine):
         style: str,
         timer: StageTimer | None = None,
         foot_cleanup: bool = True,
+        time_warp: bool = True,
     ) -> Motion:
-        """A canonical motion at 30 fps in ``style`` (same frames, trajectory and rate): the
-        three steps without an upload, for the evaluations."""
+        """A canonical motion at 30 fps in ``style`` (the content's trajectory and rate,
+        played at the style's speed with ``time_warp``): the three steps without an upload,
+        for the evaluations."""
         timer = timer or StageTimer(self.name)
         job = self._job(canon, style, foot_cleanup, timer)
-        return self._motion(job, self.predict(job, timer), timer)
+        motion = self._motion(job, self.predict(job, timer), timer)
+        factor = self.warp_factor(job.style) if time_warp else 1.0
+        return motion if factor == 1.0 else Fe.time_warp(motion, factor)
 
 
 register_engine("fast", FastEngine)

@@ -1,32 +1,31 @@
-"""The translator family (aberman2020): content clip + a style code from an example clip, a
-video's 2D keypoints, a style name or a mix of names; numpy and onnxruntime only.
+"""The translator family: content clip + a style code from an example clip, a video's 2D
+keypoints, a style name or a mix of names; numpy and onnxruntime only.
 
-Graphs (``model_export/translator.py``): ``content_encoder``, ``style3d``, ``style2d`` and
-``decoder``, all ``(batch, channels, time)``. Content runs through the content encoder and
-the decoder in overlapping windows of the training length (``WINDOW``), blended: the
-instance norms then see the span they learned on, and a frame depends on nearby frames
-only. A style clip or video goes through its style encoder whole, padded in time to a
-length bucket (a multiple of ``BUCKET`` frames, never shorter than the networks' receptive
-field) by mirroring it at both ends, so onnxruntime sees few shapes and short clips are
-padded rather than refused; the style codes of the named styles were computed the same way.
+Graphs (``model_export/translator.py``): ``style3d`` and ``style2d`` (a clip's or a video's
+style code) and ``restyler`` (content and code -> rotations), all ``(batch, channels,
+time)``. The restyler reads how the content moves about its own mean posture
+(``motion.features.restyler_input``) in overlapping windows of its training length
+(``extra.window``), blended with Hann weights, so every frame sees the context it learned
+with. A style clip or video goes through its style encoder whole, padded in time to a
+length bucket (a multiple of ``BUCKET`` frames, never shorter than the networks'
+receptive field) by mirroring it at both ends, so onnxruntime sees few shapes; the codes
+of the named styles were computed the same way (their mean over the style's Bandai
+takes). A name may be another name of a style (``extra.aliases``: old is elderly).
 
-A transfer (paper section 3.4): encode the content; style code = own + strength x (target -
-own), own being the content's 3D style code (strength 0 gives the content back, as the
-network reconstructs it); decode; the content's root trajectory (``features.decode_motion``);
-the hips raised or lowered so that the feet planted where the CONTENT's are stand on the
-content's floor, then held there (``ik.pin_canonical_feet``, before the time warp, as the
-paper does); then the time warp, to the power ``strength`` and clamped to
-[``MIN_WARP``, ``MAX_WARP``]: for a style clip the paper's ratio of velocity factors (style
-over content); for a named style or mix the style's speed against the other styles on the
-same content (``model_export.translator.style_speeds``), over the speed of the named style
-the content itself is in, if any (:meth:`TranslatorEngine.own_speed`). The ratio of a named
-style's mean velocity factor to a clip's mixes up contents and slowed every run, sped up
-every bow; a style's speed alone slowed an elderly clip restyled "elderly" to 0.54x.
+A transfer: restyle with the target code; at a ``strength`` below 1, each joint's rotation
+goes that part of the way from the content's own to the restyled one (0 gives the content
+back); the content's root trajectory
+(``features.decode_motion``); the hips raised or lowered so that the feet planted where the
+CONTENT's are stand on the content's floor, then held there (``ik.pin_canonical_feet``);
+then the time warp, to the power ``strength`` and clamped to [``MIN_WARP``, ``MAX_WARP``]:
+for a style clip the ratio of velocity factors (style over content, aberman2020); for a
+named style or mix the style's speed against the other styles on the same action
+(``model_export.translator.style_speeds``), over the speed of the named style the content
+itself is in, if any (:meth:`TranslatorEngine.own_speed`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -71,15 +70,8 @@ CODE_NORM_LIMIT = 1.25
 # named code (median 1.9), which is their own style for all 26 within 2.0 and for 44 of the
 # 51; the 9 CMU clips of ../shared/data/cmu-31 lie 3.5-6.0 from theirs (normal or proud).
 SAME_STYLE_NEAR, SAME_STYLE_FAR = 0.3, 0.5
-# The networks learned on windows of this many frames, and their instance norms take the
-# statistics of the whole time axis: a whole clip at once normalises over a different
-# span than training did. Content is therefore encoded and decoded in overlapping windows
-# of this length, blended with Hann weights. On the 51 held-out Bandai takes, decoding
-# each clip with its own style code gives joint positions 3.1 cm from the clip's (7.7 cm
-# a whole clip at once; 4.1 cm with 48-frame windows, 5.5 cm with 64). A bundle names its
-# training length (``extra.window``).
-WINDOW = 32
-WINDOW_HOP = WINDOW // 2
+# Overlapping windows of the training length (``extra.window``) run through the restyler,
+# half a window apart; a bundle must name its length.
 WINDOWS_PER_CALL = 256  # bounds the batch (memory) on long clips
 
 
@@ -120,7 +112,7 @@ def pad_mirrored(x: np.ndarray, total: int) -> tuple[np.ndarray, int]:
     return np.pad(x, ((before, extra - before), (0, 0)), mode="symmetric"), before
 
 
-def window_starts(frames: int, window: int = WINDOW, hop: int | None = None) -> list[int]:
+def window_starts(frames: int, window: int, hop: int | None = None) -> list[int]:
     """Starts of the windows covering ``frames`` frames (``frames >= window``): every
     ``hop`` frames (half a window unless given), the last one flush with the end."""
     hop = hop or window // 2
@@ -238,7 +230,7 @@ class Networks:
 
 class TranslatorEngine(Engine):
     family: ClassVar[str] = "translator"
-    warm_dims: ClassVar[dict[str, int]] = {"batch": 1, "time": 2 * BUCKET, "code_time": BUCKET}
+    warm_dims: ClassVar[dict[str, int]] = {"batch": 1, "time": 2 * BUCKET}
 
     def load_assets(self) -> None:
         extra = self.entry.extra
@@ -254,6 +246,8 @@ class TranslatorEngine(Engine):
         self.velocity = [float(v) for v in table["velocity"]]
         self.speed = [float(v) for v in table["speed"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
+        # other names of a style (Bandai's two datasets name three styles twice)
+        self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
         gaps = np.linalg.norm(self.codes[:, None] - self.codes[None], axis=-1)
         # one named style: no other to tell it from, so no clip counts as in it
@@ -270,6 +264,7 @@ class TranslatorEngine(Engine):
         return [
             {
                 "name": name,
+                "also_named": sorted(a for a, n in self.aliases.items() if n == name),
                 "clips": self.clips[i],
                 "velocity_factor": round(self.velocity[i], 4),
                 "speed": round(self.speed[i], 4),
@@ -277,12 +272,19 @@ class TranslatorEngine(Engine):
             for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
         ] + [style.listing() for style in self.registered.all()]
 
+    def row(self, name: str) -> int | None:
+        """The style table's row of ``name`` or of the style it is another name of."""
+        return self.index.get(self.aliases.get(name, name))
+
+    def known(self, name: str) -> bool:
+        """A shipped style (or another name of one) or a registered one."""
+        return self.row(name) is not None or name in self.registered
+
     def accepts(self, request: TransferRequest | StyleCodeRequest) -> bool:
-        return all(n in self.index or n in self.registered for n in request.style.names())
+        return all(self.known(name) for name in request.style.names())
 
     def refusal(self, request: TransferRequest | StyleCodeRequest) -> NotFound:
-        names = request.style.names()
-        unknown = next(n for n in names if n not in self.index and n not in self.registered)
+        unknown = next(n for n in request.style.names() if not self.known(n))
         return self._unknown(unknown)
 
     def _unknown(self, name: str) -> NotFound:
@@ -347,7 +349,7 @@ class TranslatorEngine(Engine):
     def _content_job(self, job: TranslatorJob, content: Motion, timer: StageTimer) -> None:
         with timer.stage("features"):
             enc = Fe.encode(content)
-            x_content = Fe.standardize(enc.content, self.stats, "content")
+            x_content = Fe.restyler_input(enc.content, enc.style3d, self.stats)
             job.x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
             job.windows, job.offset, job.length = self._windows(x_content, self.window)
         job.content, job.features = content, enc
@@ -358,7 +360,7 @@ class TranslatorEngine(Engine):
         return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
 
     @staticmethod
-    def _windows(x: np.ndarray, length: int = WINDOW) -> tuple[np.ndarray, int, int]:
+    def _windows(x: np.ndarray, length: int) -> tuple[np.ndarray, int, int]:
         """``x (F, C)`` standardised -> windows ``(N, C, length)`` float32 at
         :func:`window_starts` (hop half a window), the offset of frame 0 and the length they
         cover (a clip shorter than a window is mirrored at both ends to one)."""
@@ -372,9 +374,9 @@ class TranslatorEngine(Engine):
     # --- predict: every network call --------------------------------------------------------
 
     def predict(self, job: TranslatorJob, timer: StageTimer) -> Networks:
-        """The style encoder of a clip or video, then for a transfer the content encoder on
-        the windows, the style encoder on the content (its own code) and the decoder with
-        the code ``own + strength x (target - own)``."""
+        """The style encoder of a clip or video, then for a transfer the style encoder on
+        the content (its own code, which tells its own speed) and the restyler on the
+        content's windows with the target code."""
         with timer.stage("encode"):
             style = job.style
             if style is None:
@@ -384,18 +386,14 @@ class TranslatorEngine(Engine):
                 style = self._bounded(StyleCode(code, job.style_velocity, source))
             if job.windows is None:
                 return Networks(style)
-            latents = [
-                self.run("content_encoder", {"content": job.windows[i : i + WINDOWS_PER_CALL]})[0]
-                for i in range(0, len(job.windows), WINDOWS_PER_CALL)
-            ]
             own = self.run("style3d", {"motion3d": job.x_own})[0][0]
-        target = np.asarray(style.code, dtype=np.float32).reshape(own.shape)
-        mixed = own + np.float32(job.strength) * (target - own)
+        target = np.asarray(style.code, dtype=np.float32).reshape(1, -1)
         with timer.stage("decode"):
-            decoded = [
-                self.run("decoder", {"code": z, "style_code": np.repeat(mixed[None], len(z), 0)})[0]
-                for z in latents
-            ]
+            decoded = []
+            for i in range(0, len(job.windows), WINDOWS_PER_CALL):
+                windows = job.windows[i : i + WINDOWS_PER_CALL]
+                codes = np.repeat(target, len(windows), 0)
+                decoded.append(self.run("restyler", {"content": windows, "style_code": codes})[0])
         return Networks(style, own, np.concatenate(decoded))
 
     # --- finish ----------------------------------------------------------------------------
@@ -406,19 +404,14 @@ class TranslatorEngine(Engine):
         if job.content is None:
             return StyleCodeResult(out.style, self.nearest(out.style.code))
         result = self._stylized(job, out, timer)
-        clip = job.clip
-        if result.warp != 1.0:  # the clip as sent too: its other joints follow the new timing
-            with timer.stage("time_warp"):
-                original = Fe.time_warp(clip.original, result.warp)
-            limits.check_frames(original, self.settings, what="result")
-            clip = dataclasses.replace(clip, original=original)
         return write_result(
-            clip,
+            job.clip,
             result.motion,
             self.settings,
             timer,
             warnings=out.style.warnings + result.warnings,
             suffix="transfer",
+            warp=result.warp,
         )
 
     def _stylized(self, job: TranslatorJob, out: Networks, timer: StageTimer) -> Transfer:
@@ -431,6 +424,9 @@ class TranslatorEngine(Engine):
                 blended[job.offset : job.offset + content.num_frames], self.stats, "output"
             )
             output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
+            if job.strength < 1.0:  # part of the way from the content's own pose
+                own = enc.content[:, : Fe.OUTPUT_CHANNELS]
+                output = own + np.float32(job.strength) * (output - own)
             motion = Fe.decode_motion(output, content, face=enc.facing)
         if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
@@ -481,13 +477,13 @@ class TranslatorEngine(Engine):
         return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
     def code_of_name(self, name: str) -> StyleCode:
-        """The code of a named style: shipped, or registered (``service.registered_styles``;
-        a file read, so called in the inference pool)."""
-        if name not in self.index:
+        """The code of a named style: shipped (or another name of one), or registered
+        (``service.registered_styles``; a file read, so called in the inference pool)."""
+        i = self.row(name)
+        if i is None:
             if (style := self.registered.lookup(name, self.name, self.version)) is not None:
                 return StyleCode(style.code.copy(), style.velocity, "style_name", speed=style.speed)
             raise self._unknown(name)
-        i = self.index[name]
         return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=self.speed[i])
 
     def code_of_mix(self, mix: dict[str, float]) -> StyleCode:

@@ -25,6 +25,9 @@ async def stylize_clip(
     content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
     style_name: Annotated[str, Form(min_length=1, max_length=100)],
     foot_cleanup: Annotated[bool, Form()] = True,
+    time_warp: Annotated[
+        bool, Form(description="play the result at the style's speed (frame count changes)")
+    ] = True,
     mapping: Annotated[str | None, Form(description="JSON joint-name map")] = None,
     format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
 ) -> pipeline.Response:
@@ -32,6 +35,7 @@ async def stylize_clip(
         content=pipeline.upload(content, settings),
         style_name=style_name,
         foot_cleanup=foot_cleanup,
+        time_warp=time_warp,
         mapping=pipeline.parse_mapping(mapping),
         format=format,
     )

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import tarfile
 import zipfile
 from pathlib import Path
 
@@ -25,8 +26,6 @@ from service.engines.translator import (
     OUTPUT_SMOOTHING,
     SAME_STYLE_FAR,
     SAME_STYLE_NEAR,
-    WINDOW,
-    WINDOW_HOP,
     TranslatorEngine,
     pad_mirrored,
     padded_length,
@@ -167,18 +166,21 @@ def test_padding_buckets_and_mirroring():
     np.testing.assert_array_equal(short[offset : offset + 3], x[:3])
 
 
+WINDOW = 64  # the shipped restyler's training length (its bundle's extra.window)
+
+
 @pytest.mark.parametrize("frames", [WINDOW, WINDOW + 1, 2 * WINDOW, 5 * WINDOW + 7])
 def test_windows_cover_every_frame(frames):
-    starts = window_starts(frames)
+    starts = window_starts(frames, WINDOW)
     assert starts[0] == 0 and starts[-1] == frames - WINDOW
-    assert all(0 < b - a <= WINDOW_HOP for a, b in zip(starts, starts[1:], strict=False))
+    assert all(0 < b - a <= WINDOW // 2 for a, b in zip(starts, starts[1:], strict=False))
     covered = np.zeros(frames, dtype=int)
     for s in starts:
         covered[s : s + WINDOW] += 1
     assert covered.min() >= 1
 
 
-@pytest.mark.parametrize("window", [WINDOW, 64])  # 64: a bundle trained on longer windows
+@pytest.mark.parametrize("window", [32, WINDOW])
 def test_blending_windows_of_one_signal_gives_it_back(window):
     frames = 3 * window + 5
     signal = np.random.default_rng(0).normal(size=(frames, 4)).astype(np.float32)
@@ -238,6 +240,7 @@ def test_cmu_fixture_with_a_style_name_is_warped_and_keeps_unmapped_joints(share
     name = "old" if "old" in STYLES else STYLES[0]
     out = assert_transfer_ok(transfer(shared_client, walk, style_name=name), walk)
     factor = speeds()[name] / own_speed(shared_client, walk)  # a named style's relative speed
+    factor = min(max(factor, MIN_WARP), MAX_WARP)
     assert out.num_frames == warped_frames(source.num_frames, factor)
     # joints with no canonical counterpart follow the warped original
     rig = retarget.make_rig(source.skeleton, source)
@@ -277,7 +280,7 @@ def test_a_clip_restyled_to_the_named_style_it_is_in_keeps_its_timing(shared_cli
     speed = speeds()
     for clip, style in [
         ("dataset-1_walk_not-confident_002", "not-confident"),
-        ("dataset-1_walk_masculinity_002", "masculinity"),
+        ("dataset-1_walk_masculinity_002", "masculine"),  # masculinity is its alias
     ]:
         content = bandai(clip)
         nearest = nearest_style(shared_client, content)
@@ -360,7 +363,7 @@ def test_style_mix_and_json_format(shared_client, walk):
 
 @needs_model
 def test_strength_zero_ignores_the_style(shared_client, walk):
-    """At strength 0 the code is the content's own: any two styles give the same clip."""
+    """At strength 0 every joint keeps the content's pose: any two styles give the same clip."""
     a = transfer(shared_client, walk, style_name=STYLES[0], strength="0", time_warp="false")
     b = transfer(shared_client, walk, style_name=STYLES[-1], strength="0", time_warp="false")
     c = transfer(shared_client, walk, style_name=STYLES[-1], time_warp="false")
@@ -416,15 +419,16 @@ def test_decoder_jitter_is_smoothed_away(engine, walk):
 def test_a_frame_depends_on_nearby_frames_only(engine, walk):
     """The networks run on training-length windows: frames appended far after a frame
     leave it as it was (a whole clip at once renormalised every frame by all the others)."""
-    content = retarget.to_canonical(bvh.loads(walk))
 
     def there_and_back(x: np.ndarray) -> np.ndarray:  # the walk, then backwards, then again
         return np.concatenate([x, x[::-1], x])
 
+    walk = retarget.to_canonical(bvh.loads(walk))
+    content = walk.replace(lrot=there_and_back(walk.lrot), lpos=there_and_back(walk.lpos))
     longer = content.replace(lrot=there_and_back(content.lrot), lpos=there_and_back(content.lpos))
     code = engine.code_of_name(STYLES[0]).code
     # frames before the clip's last window, less the output smoothing's reach (4 sigma)
-    kept = window_starts(content.num_frames)[-1] - int(4 * OUTPUT_SMOOTHING)
+    kept = window_starts(content.num_frames, WINDOW)[-1] - int(4 * OUTPUT_SMOOTHING)
     assert kept >= WINDOW // 2
     a = engine.transfer(content, code, time_warp=False, foot_cleanup=False).motion
     b = engine.transfer(longer, code, time_warp=False, foot_cleanup=False).motion
@@ -432,22 +436,36 @@ def test_a_frame_depends_on_nearby_frames_only(engine, walk):
 
 
 @needs_model
-def test_own_style_gives_held_out_clips_back(engine):
-    """Strength 0 decodes a clip with its own style code: on the 15 held-out takes of Bandai
-    dataset 1 the joints land 5.2 cm from the clip's on average (11.3 cm when a whole clip
-    ran through the networks at once)."""
-    split = json.loads((Settings().models_dir / "translator" / "split.json").read_text())
-    held_out = split.get("val_takes") or split["validation_takes"]
-    takes = sorted(t for t in held_out if t.startswith("dataset-1_"))
-    errors = []
-    for take in takes:
-        path = data_path("bandai", take.split("_")[0], f"{take}.bvh")
-        content = retarget.to_canonical(bvh.load(path))
-        own = engine.code_of_motion(content).code
-        out = engine.transfer(content, own, strength=0.0, time_warp=False, foot_cleanup=False)
-        local = [Fe.encode(m).style3d.reshape(m.num_frames, -1, 3) for m in (out.motion, content)]
-        errors.append(np.linalg.norm(local[0] - local[1], axis=-1).mean() * Fe.LEG)
-    assert np.mean(errors) < 7.5, np.round(errors, 1)
+def test_strength_zero_gives_the_content_back(engine, walk):
+    """Strength 0 keeps the content's pose (rotations and hips height) frame for frame; half
+    way lands between it and the full style."""
+    content = retarget.to_canonical(bvh.loads(walk))
+    code = engine.code_of_name("elderly").code
+
+    def restyled(strength: float):
+        out = engine.transfer(content, code, strength=strength, time_warp=False, foot_cleanup=False)
+        return Fe.encode(out.motion).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
+
+    own = Fe.encode(content).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
+    assert np.abs(restyled(0.0) - own).max() < 0.05  # cm
+    full, half = restyled(1.0), restyled(0.5)
+    gap = np.linalg.norm(full - own, axis=-1).mean()
+    assert gap > 1.0
+    assert np.linalg.norm(half - own, axis=-1).mean() < 0.75 * gap
+
+
+@needs_model
+def test_another_name_of_a_style_is_that_style(shared_client, walk):
+    """Bandai's dataset 1 calls elderly "old": both names give one result, and the style
+    list gives the one name with the other."""
+    old = transfer(shared_client, walk, style_name="old", time_warp="false")
+    elderly = transfer(shared_client, walk, style_name="elderly", time_warp="false")
+    assert old.status_code == elderly.status_code == 200
+    assert old.text == elderly.text
+    styles = shared_client.get("/v1/styles").json()["translator"]
+    entry = next(s for s in styles if s["name"] == "elderly")
+    assert entry["also_named"] == ["old"]
+    assert "old" not in {s["name"] for s in styles}
 
 
 @needs_model
@@ -510,28 +528,34 @@ def test_codes_within_the_learned_styles_are_not_bounded(shared_client, walk):
     assert not any("outside the learned styles" in w for w in r.json()["warnings"])
 
 
-HELD_OUT = (  # short held-out takes of the shipped split: the style is in the nearest 3
-    "dataset-1_dash_proud_001",
-    "dataset-1_run_tired_001",
-    "dataset-1_walk-right_masculinity_001",
-    "dataset-1_run_not-confident_001",
-)
+def held_out_dataset2_takes() -> dict[str, bytes]:
+    """Bandai dataset-2 takes the shipped translator never trained on (its validation rule:
+    not as content, target or style clip), as BVH text by take name."""
+    from training.translator.fit import held_out_take
+
+    archive = data_path("bandai", "dataset-2", "dataset-2-subset.tar.xz")
+    takes = {}
+    with tarfile.open(archive) as tar:
+        for member in tar.getmembers():
+            name = Path(member.name).stem
+            if member.name.endswith(".bvh") and held_out_take(name):
+                takes[name] = tar.extractfile(member).read()
+    return takes
 
 
 @needs_model
 def test_held_out_clips_are_near_their_style(shared_client):
-    split = json.loads((Settings().models_dir / ENTRY["extra"]["split"]).read_text())
+    """A clip's style code lies near its style's: the true style is among the three nearest
+    for most never-seen takes (chance: 3 in 16)."""
+    takes = held_out_dataset2_takes()
+    assert len(takes) >= 20
     hits = 0
-    takes = [t for t in HELD_OUT if t in split["val_takes"]]
-    if not takes:
-        pytest.skip("the shipped split holds none of the chosen takes")
-    for take in takes:
-        style = take.split("_")[2]
-        files = {"style": ("s.bvh", bandai(take), "text/plain")}
+    for take, text in takes.items():
+        files = {"style": ("s.bvh", text, "text/plain")}
         body = shared_client.post("/v1/style-code", files=files).json()
         assert len(body["code"]) == ENTRY["extra"]["style_dim"]
-        hits += style in [n["style"] for n in body["nearest"][:3]]
-    assert hits >= len(takes) - 1, f"{hits} of {len(takes)} held-out clips near their style"
+        hits += take.split("_")[2] in [n["style"] for n in body["nearest"][:3]]
+    assert hits >= 0.6 * len(takes), f"{hits} of {len(takes)} held-out clips near their style"
 
 
 # --------------------------------------------------------------------------- errors

@@ -204,7 +204,7 @@ def test_the_split_covers_every_source_folder():
 
 
 def test_log_probabilities_rank_the_classes_the_prediction_takes():
-    from training.eval_style import ConvClipClassifier
+    from training.judges import ConvClipClassifier
 
     rng = np.random.default_rng(0)
     feats = [rng.normal(size=(60, 5)).astype(np.float32) + k for k in (0, 0, 3, 3)]
@@ -223,7 +223,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     from service.config import Settings
     from service.manifest import load_manifest
     from tests.conftest import data_path
-    from training.eval_style import ConvClipClassifier
+    from training.judges import ConvClipClassifier
 
     data_path("bandai")
     data_path("cmu-31")

@@ -46,28 +46,14 @@ def test_pooling_is_ceil_mode():
     torch.testing.assert_close(torch.nn.functional.max_pool1d(padded, 2), want)
 
 
-def test_physics_losses_on_real_motion(walk_features):
+def test_bone_loss_on_real_motion(walk_features):
     stats = FF.FastStats.fit([walk_features])
     physics = FC.Physics(stats.mean, stats.std)
-    z = torch.tensor(stats.normalize(walk_features))[None]
-    raw = physics.raw(z)
-    planted = raw[..., FF.CONTACTS] > 0.5
+    raw = physics.raw(torch.tensor(stats.normalize(walk_features))[None])
     assert physics.bone_loss(raw).item() < 1e-6  # real positions keep their bones
-    still = physics.foot_loss(raw, planted).item()
-    assert still < 0.05  # planted feet barely move (leg lengths / s, squared)
-    slid = raw.clone()
-    slid[..., FF.VELOCITY] += 0.5  # the root moves but the feet stay put in its frame
-    assert physics.foot_loss(slid, planted).item() > still + 0.2
     stretched = raw.clone()
     stretched[..., : FF.POSITION_CHANNELS] *= 1.1
     assert physics.bone_loss(stretched).item() > 1e-4
-
-
-def test_gram_is_time_averaged():
-    h = torch.randn(3, 8, 40)
-    g = FC.gram(h)
-    assert g.shape == (3, 8, 8)
-    torch.testing.assert_close(FC.gram(torch.cat([h, h], dim=-1)), g)
 
 
 def test_export_parity(tmp_path):
@@ -91,13 +77,19 @@ def test_export_parity(tmp_path):
 
 
 def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
-    """Both training scripts for a few steps, then the export into a temporary models
-    folder; the manifest entry validates and lists every graph with its sha256."""
+    """Both training scripts for a few steps (the style networks distilled from the shipped
+    translator's outputs for four Bandai takes), then the export into a copy of the shipped
+    models folder; the manifest entry validates, lists every graph with its sha256 and
+    takes its style's speed from the translator."""
+    import shutil
+
     from model_export import fast as X
+    from service.config import Settings
     from service.manifest import load_manifest, verify_files
     from training import fast_autoencoder, fast_style
 
     monkeypatch.setenv("MOTION_SMOKE", "1")
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     ckpt, logs, models = tmp_path / "ckpt", tmp_path / "runs", tmp_path / "models"
     common = ["--checkpoint-dir", str(ckpt), "--log-dir", str(logs)]
     result = fast_autoencoder.main([*common, "--hidden", "32", "--batch", "4"])
@@ -109,12 +101,13 @@ def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
     assert all(np.isfinite(v) for v in summary["angry"]["train"].values())
     assert (logs / "style_angry" / "log.txt").exists()
 
-    models.mkdir()
+    shutil.copytree(Settings().models_dir, models)
     X.main(["--checkpoint-dir", str(ckpt), "--models-dir", str(models)])
     manifest = load_manifest(models)
-    (entry,) = manifest.models
-    assert entry.family == "fast"
+    entry = next(m for m in manifest.models if m.family == "fast")
+    teacher = next(m for m in manifest.models if m.family == "translator")
     assert set(entry.graphs) == {"projection", "style_angry"}
     assert verify_files(entry, models) == []
-    assert entry.extra["styles"]["angry"]["clips"] > 0
+    assert entry.extra["styles"]["angry"]["speed"] == teacher.extra["styles"]["angry"]["speed"]
+    assert entry.extra["teacher"] == f"{teacher.name} {teacher.version}"
     assert "research and evaluation only" in entry.licence

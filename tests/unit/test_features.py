@@ -63,7 +63,7 @@ def test_shapes_and_dtypes():
     assert enc.content.dtype == enc.style3d.dtype == np.float32
     s2 = Fe.style2d_from_positions(enc.gpos, 0.3, 1.0)
     assert s2.shape == (50, Fe.STYLE2D_CHANNELS) == (50, 32)
-    assert Fe.OUTPUT_CHANNELS == 126
+    assert Fe.OUTPUT_CHANNELS == Fe.ROTATION_CHANNELS + 1 == 127  # rotations, hips height
     np.testing.assert_array_equal(Fe.content_features(m), enc.content)
     np.testing.assert_array_equal(Fe.style3d_features(m), enc.style3d)
 
@@ -105,7 +105,14 @@ def test_decode_of_encode_returns_the_rotations():
     assert rot.angle(rot.mul(rot.inv(lrot), m.lrot)).max() < 1e-3
     out = Fe.decode_motion(enc.content[:, : Fe.OUTPUT_CHANNELS], m)
     np.testing.assert_allclose(K.global_positions(out), K.global_positions(m), atol=1e-2)
-    np.testing.assert_array_equal(out.lpos, m.lpos)  # the content's root trajectory
+    np.testing.assert_allclose(out.lpos, m.lpos, atol=1e-4)  # the content's root trajectory
+    # the last channel sets the hips' height over the floor, in leg lengths; the travel stays
+    lifted = enc.content[:, : Fe.OUTPUT_CHANNELS].copy()
+    lifted[:, Fe.ROTATION_CHANNELS] += 0.1
+    up = K.global_positions(Fe.decode_motion(lifted, m)) - K.global_positions(out)
+    up = up[:, 1:]  # every joint but the root on the floor
+    np.testing.assert_allclose(up[..., 1], 0.1 * Fe.LEG, atol=1e-3)
+    np.testing.assert_allclose(up[..., [0, 2]], 0.0, atol=1e-3)
 
 
 def test_decode_normalises_any_output():

@@ -62,23 +62,6 @@ def test_a_new_export_drops_the_old_evaluation(models):
     assert "evaluation" not in doc["models"][0]["metrics"]
 
 
-def test_style_evaluation_records_its_table(models):
-    from training import eval_style as ES
-
-    rows = {"translator": {"n": 969, "style_accuracy": 0.308, "content_accuracy": 0.483}}
-    report = {
-        "model_name": "translator-test", "model_version": "1", "takes_of": "translator",
-        "held_out_takes": 51, "styles": 19, "rows": rows,
-    }  # fmt: skip
-    ES.record_in_manifest(report, models)
-    (model,) = load_manifest(models).models
-    figures = model.metrics["evaluation"]["translator_held_out_takes"]
-    assert figures["rows"] == rows and figures["held_out_takes"] == 51
-    assert "cores; BLAS kernels:" in figures["machine"]  # figures differ by CPU
-    with pytest.raises(ValueError, match="not '2'"):
-        ES.record_in_manifest(report | {"model_version": "2"}, models)
-
-
 def test_dance_evaluation_records_its_summary(models):
     from training import eval_dance as ED
 

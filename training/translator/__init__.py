@@ -1,2 +1,3 @@
-"""The aberman2020 motion translator: networks (``model``), data (``data``), training
-(``train``; run ``python -m training.translator``)."""
+"""The translator: networks (``networks``), Bandai's aligned pairs (``pairs``), training
+(``fit``) and the shipped model's schedule (``schedule``; run ``python -m
+training.translator``)."""

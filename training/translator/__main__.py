@@ -1,3 +1,3 @@
-from training.translator.train import main
+from training.translator.schedule import main
 
-main()
+raise SystemExit(main())

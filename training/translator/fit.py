@@ -1,0 +1,416 @@
+"""Training of the translator on Bandai's aligned pairs (``training.translator.pairs``).
+
+    python -m training.translator.fit --out checkpoints/translator.pt [--steps N]
+        [--resume] [--threads 1] [--log runs/translator]
+
+Each step draws a batch of content windows and asks the restyler, given a style code,
+for the rotations of a real performance of the same action in that style, aligned in
+time (``pairs``; the style may be the content's own, the target another take). The code
+comes from the 3D style encoder on a window of another take of the style, or from the 2D
+encoder on a projection of it. Losses, each a small
+function below: rotations (standardised 6D), body positions relative to the hips, their
+velocities, a style classifier on the codes (codes of one style together, so that a
+style's mean code stands for it), and the 2D codes regressed on the 3D ones.
+
+The schedule of the shipped model is ``training/translator/schedule.json``
+(``make train-translator`` replays it). Checkpoints hold the weights, the network and
+training configuration and the feature statistics; ``--resume`` also needs the
+optimiser state, kept in ``<out>.state`` and never committed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import time
+import zlib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from motion import canonical as C
+from motion import features as Fe
+from motion.styles import STYLE_ALIASES, canonical_style
+from training import data as D
+from training.fk import RootLocalFK
+from training.translator.networks import (
+    Discriminator,
+    NetworkConfig,
+    Translator,
+    count_parameters,
+)
+from training.translator.pairs import (
+    Pairs,
+    at_frames,
+    encode_takes,
+    load_alignments,
+    save_alignments,
+    window_of,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class TrainConfig:
+    steps: int = 12000
+    batch: int = 32
+    window: int = 64  # content frames per example
+    style_window: int = 96  # frames the style encoder sees in training
+    lr: float = 3e-4
+    lr_final_fraction: float = 0.1  # cosine decay to this fraction of lr
+    p_named: float = 0.5  # examples conditioned on the style's named code
+    p_style2d: float = 0.2  # examples conditioned on the 2D encoder's code (else the 3D one's)
+    views: int = 6  # 2D projections per take
+    w_rot: float = 1.0
+    w_pos: float = 10.0
+    w_vel: float = 20.0
+    w_code: float = 1.0
+    w_2d: float = 1.0
+    w_adv: float = 0.0
+    w_track: float = 0.0
+    seed: int = 0
+    val_every: int = 500
+    checkpoint_minutes: float = 10.0
+
+
+def losses_of(
+    out: torch.Tensor, target: torch.Tensor, norm: dict, fk: RootLocalFK
+) -> dict[str, torch.Tensor]:
+    """Rotation, position and velocity terms between standardised rotations ``out`` and
+    ``target`` ``(B, 126, T)``."""
+    pos_out = hips_relative(out, norm, fk)
+    pos_target = hips_relative(target, norm, fk)
+    return {
+        "rot": F.l1_loss(out, target),
+        "pos": F.l1_loss(pos_out, pos_target),
+        "vel": F.l1_loss(pos_out[:, 1:] - pos_out[:, :-1], pos_target[:, 1:] - pos_target[:, :-1]),
+    }
+
+
+TRACKED = [int(np.flatnonzero(Fe.BODY == C.INDEX[n])[0])
+           for n in ("Hand_L", "Hand_R", "Foot_L", "Foot_R")]  # fmt: skip
+
+
+def path_decorrelation(positions: torch.Tensor, content: torch.Tensor) -> torch.Tensor:
+    """1 - the correlation of the hands' and feet's paths about the hips with the content's,
+    ``(B, T, 21, 3)`` each: each path's mean over the window removed, then sum(a . b) /
+    sqrt(sum |a|^2 sum |b|^2) per joint. Free of where a joint is held and of how far it
+    moves (a style's to choose), it asks only that it moves when and where the content's
+    does."""
+    a = positions[..., TRACKED, :]
+    b = content[..., TRACKED, :]
+    a = a - a.mean(dim=1, keepdim=True)
+    b = b - b.mean(dim=1, keepdim=True)
+    dot = (a * b).sum(dim=(1, 3))
+    norm = torch.sqrt((a * a).sum(dim=(1, 3)) * (b * b).sum(dim=(1, 3)) + 1e-6)
+    return (1 - dot / norm).mean()
+
+
+def disc_input(positions: torch.Tensor, hips_height: torch.Tensor) -> torch.Tensor:
+    """``(B, 127, T)`` what the discriminator reads of ``(B, T, 21, 3)`` positions relative
+    to the hips and the hips height ``(B, T)`` (leg lengths): the positions and their
+    change per frame, each scaled to about unit spread, and how far the hips are from a
+    leg's length above the floor."""
+    flat = positions.flatten(-2)
+    vel = torch.cat([flat[:, 1:] - flat[:, :-1], flat[:, -1:] - flat[:, -2:-1]], dim=1)
+    height = 10.0 * (hips_height[..., None] - 1.0)
+    return torch.cat([2.0 * flat, 15.0 * vel, height], dim=-1).transpose(1, 2)
+
+
+def hips_relative(rot: torch.Tensor, norm: dict, fk: RootLocalFK) -> torch.Tensor:
+    """Body positions ``(B, T, 21, 3)`` relative to the hips, in leg lengths, of a
+    standardised output ``(B, 127, T)`` (rotations, then the hips height)."""
+    raw = rot.transpose(1, 2) * norm["out_std"] + norm["out_mean"]
+    r6 = raw[..., : Fe.ROTATION_CHANNELS].unflatten(-1, (-1, 6))
+    pos = fk(r6, torch.zeros(r6.shape[:2]))
+    return pos - pos[..., :1, :]
+
+
+def held_out_take(name: str) -> bool:
+    """One dataset-2 take in ten (and its mirror image), by a hash of its name: content of
+    the validation examples, never trained on. Dataset 2 performs each action in each
+    style four times, so its pairs stay complete without them."""
+    base = name.removesuffix("~mirrored")
+    return base.startswith("dataset-2") and zlib.crc32(base.encode()) % 10 == 0
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, net_cfg: NetworkConfig, threads: int) -> None:
+        torch.set_num_threads(threads)
+        torch.manual_seed(cfg.seed)
+        self.cfg = cfg
+        self.rng = np.random.default_rng(cfg.seed)
+        clips = D.load_bandai()
+        self.styles = sorted({canonical_style(c.style) for c in clips})
+        net_cfg.num_styles = len(self.styles)
+        takes = encode_takes(clips, self.styles, cfg.views, self.rng, mirror=True)
+        self.stats = Fe.compute_stats(
+            {
+                "content": [t.content for t in takes],
+                "style3d": [t.style3d for t in takes],
+                "style2d": [t.style2d.reshape(-1, Fe.STYLE2D_CHANNELS) for t in takes],
+                "control": [Fe.control_features(t.content, t.style3d) for t in takes],
+            }
+        )
+        for t in takes:
+            t.inputs = Fe.restyler_input(t.content, t.style3d, self.stats)
+        held_out = {t.name for t in takes if held_out_take(t.name)}
+        self.pairs = Pairs([t for t in takes if t.name not in held_out], cfg.window, self.rng)
+        self.val_pairs = Pairs(takes, cfg.window, self.rng, contents=held_out)
+        self.alignment_cache = D.cache_dir() / "translator_alignments.npz"
+        if self.alignment_cache.exists():
+            self.pairs.alignments = load_alignments(self.alignment_cache)
+            self.val_pairs.alignments = self.pairs.alignments
+        self._saved_alignments = len(self.pairs.alignments)
+        self.net = Translator(net_cfg)
+        self.disc = Discriminator(net_cfg)
+        self.disc_opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.99))
+        self.fk = RootLocalFK()
+        mean, std = self.stats.get("output")
+        self.norm = {"out_mean": torch.tensor(mean), "out_std": torch.tensor(std)}
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
+        self.step = 0
+        self.stages: list[str] = []  # schedule stages the weights have finished
+        print(
+            f"{len(takes)} takes, styles {self.styles}, "
+            f"restyler {count_parameters(self.net.restyler):,} parameters"
+        )
+
+    # --- batches ---------------------------------------------------------------------------
+
+    def _content_input(self, take, start: int) -> np.ndarray:
+        return take.inputs[start : start + self.cfg.window]
+
+    def batch(self, pairs: Pairs | None = None) -> dict[str, torch.Tensor]:
+        """Content windows ``(B, 25, T)`` (restyler input), standardised target rotations
+        ``(B, 126, T)``, the style windows in 3D ``(B, 63, Ts)`` and seen in 2D ``(B, 32,
+        Ts)``, which examples take the 2D code, and the styles."""
+        cfg = self.cfg
+        pairs = pairs or self.pairs
+        rows: dict[str, list] = {
+            k: [] for k in ("content", "content_pos", "target", "style3d", "style2d", "real")
+        }
+        source, labels, real_labels = [], [], []
+        for _ in range(cfg.batch):
+            take, start, target_take, frames = pairs.draw_pair()
+            target = at_frames(target_take.content[:, : Fe.OUTPUT_CHANNELS], frames)
+            style_take, style_start = self.pairs.style_window(target_take.style, cfg.style_window)
+            view = style_take.style2d[self.rng.integers(len(style_take.style2d))]
+            rows["content"].append(self._content_input(take, start))
+            rows["content_pos"].append(take.style3d[start : start + cfg.window])
+            rows["target"].append(Fe.standardize(target, self.stats, "output"))
+            for kind, x in (("style3d", style_take.style3d), ("style2d", view)):
+                x = Fe.standardize(x, self.stats, kind)
+                rows[kind].append(window_of(x, style_start, cfg.style_window))
+            u = self.rng.random()
+            source.append(0 if u < cfg.p_named else 2 if u < cfg.p_named + cfg.p_style2d else 1)
+            labels.append(style_take.style)
+            real_style = int(self.pairs.styles[self.rng.integers(len(self.pairs.styles))])
+            real_take, real_start = self.pairs.style_window(real_style, cfg.window)
+            real = np.concatenate(
+                [real_take.style3d, real_take.content[:, Fe.ROTATION_CHANNELS, None]], axis=1
+            )
+            rows["real"].append(window_of(real, real_start, cfg.window))
+            real_labels.append(real_style)
+        batch = {
+            k: torch.from_numpy(np.stack(v)).transpose(1, 2).contiguous() for k, v in rows.items()
+        }
+        return batch | {
+            "source": torch.tensor(source),  # 0 named, 1 3D encoder, 2 2D encoder
+            "labels": torch.tensor(labels),
+            "real_labels": torch.tensor(real_labels),
+        }
+
+    # --- step ------------------------------------------------------------------------------
+
+    def forward(self, b: dict) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """The generator's loss terms of a batch, and its output rotations."""
+        net = self.net
+        named = net.named(b["labels"])
+        code3 = net.style3d(b["style3d"])
+        code2 = net.style2d(b["style2d"])
+        source = b["source"][:, None]
+        codes = torch.where(source == 0, named, torch.where(source == 1, code3, code2))
+        out = net.restyler(b["content"], codes)
+        terms = losses_of(out, b["target"], self.norm, self.fk)
+        if self.cfg.w_track:
+            content = b["content_pos"].transpose(1, 2).unflatten(-1, (-1, 3))
+            terms["track"] = path_decorrelation(
+                hips_relative(out, self.norm, self.fk), content - content[..., :1, :]
+            )
+        terms["code"] = F.mse_loss(code3, named.detach())
+        terms["2d"] = F.mse_loss(code2, named.detach())
+        if self.cfg.w_adv:
+            fake = disc_input(hips_relative(out, self.norm, self.fk), self.hips_height(out))
+            terms["adv"] = ((self.disc(fake, b["labels"]) - 1) ** 2).mean()
+        return terms, out
+
+    def hips_height(self, out: torch.Tensor) -> torch.Tensor:
+        """The hips height ``(B, T)`` in leg lengths of a standardised output."""
+        k = Fe.ROTATION_CHANNELS
+        return out[:, k] * self.norm["out_std"][k] + self.norm["out_mean"][k]
+
+    def disc_step(self, b: dict, out: torch.Tensor) -> dict[str, float]:
+        """One discriminator update (least squares): real Bandai windows of their style
+        against this step's restyled windows of their target style."""
+        real = b["real"].transpose(1, 2)
+        height = real[..., -1]
+        real = real[..., :-1].unflatten(-1, (-1, 3))
+        real = disc_input(real - real[..., :1, :], height)
+        out = out.detach()
+        fake = disc_input(hips_relative(out, self.norm, self.fk), self.hips_height(out))
+        loss_real = ((self.disc(real, b["real_labels"]) - 1) ** 2).mean()
+        loss_fake = (self.disc(fake, b["labels"]) ** 2).mean()
+        loss = loss_real + loss_fake
+        self.disc_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.disc_opt.step()
+        return {
+            "d_real": float(loss_real.detach()),
+            "d_fake": float(loss_fake.detach()),
+        }
+
+    def train_step(self) -> dict[str, float]:
+        cfg = self.cfg
+        b = self.batch()
+        terms, out = self.forward(b)
+        loss = sum(getattr(cfg, f"w_{k}") * v for k, v in terms.items())
+        lr = self.learning_rate()
+        for group in self.opt.param_groups + self.disc_opt.param_groups:
+            group["lr"] = lr
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.net.parameters(), 5.0)
+        self.opt.step()
+        self.step += 1
+        scores = self.disc_step(b, out) if cfg.w_adv else {}
+        return (
+            {k: float(v.detach()) for k, v in terms.items()}
+            | scores
+            | {"loss": float(loss.detach()), "lr": lr}
+        )
+
+    def learning_rate(self) -> float:
+        cfg = self.cfg
+        progress = min(self.step / max(cfg.steps, 1), 1.0)
+        cosine = 0.5 * (1 + math.cos(math.pi * progress))
+        return cfg.lr * (cfg.lr_final_fraction + (1 - cfg.lr_final_fraction) * cosine)
+
+    @torch.no_grad()
+    def validate(self, batches: list[dict]) -> dict[str, float]:
+        self.net.eval()
+        sums: dict[str, float] = {}
+        for b in batches:
+            for k, v in self.forward(b)[0].items():
+                sums[k] = sums.get(k, 0.0) + float(v) / len(batches)
+        self.net.train()
+        return sums
+
+    # --- checkpoints -----------------------------------------------------------------------
+
+    def save(self, path: Path, finished: str | None = None) -> None:
+        """Weights, configurations, statistics and styles in ``path``; the optimiser and the
+        random state (for ``--resume``) in ``path.state``, never committed."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        stats = {f"{k}_{s}": torch.tensor(getattr(self.stats, s)[k])
+                 for k in self.stats.mean for s in ("mean", "std")}  # fmt: skip
+        payload = {
+            "weights": self.net.state_dict(),
+            "network": self.net.cfg.to_dict(),
+            "train": asdict(self.cfg),
+            "styles": self.styles,
+            "aliases": STYLE_ALIASES,
+            "stats": stats,
+            "step": self.step,
+            "stages": self.stages + ([finished] if finished else []),
+        }
+        if len(self.pairs.alignments) > self._saved_alignments:  # dynamic time warping is slow
+            save_alignments(self.alignment_cache, self.pairs.alignments)
+            self._saved_alignments = len(self.pairs.alignments)
+        torch.save(payload, str(path) + ".tmp")
+        os.replace(str(path) + ".tmp", path)
+        state = {
+            "opt": self.opt.state_dict(),
+            "disc": self.disc.state_dict(),
+            "disc_opt": self.disc_opt.state_dict(),
+            "step": self.step,
+            "rng": self.rng.bit_generator.state,
+        }
+        torch.save(state, str(path) + ".state.tmp")
+        os.replace(str(path) + ".state.tmp", str(path) + ".state")
+
+    def load(self, path: Path, optimiser: bool) -> None:
+        payload = torch.load(path, weights_only=False)
+        self.net.load_state_dict(payload["weights"])
+        self.step = int(payload["step"])
+        self.stages = list(payload.get("stages", []))
+        state_path = Path(str(path) + ".state")
+        if optimiser:
+            state = torch.load(state_path, weights_only=False)
+            self.opt.load_state_dict(state["opt"])
+            self.disc.load_state_dict(state["disc"])
+            self.disc_opt.load_state_dict(state["disc_opt"])
+            self.rng.bit_generator.state = state["rng"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=REPO / "checkpoints" / "translator.pt")
+    parser.add_argument("--init", type=Path, help="start from these weights (no optimiser)")
+    parser.add_argument("--resume", action="store_true", help="continue --out with its optimiser")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--log", type=Path, default=REPO / "runs" / "translator")
+    parser.add_argument("--max-minutes", type=float, default=None)
+    parser.add_argument("--channels", type=int, default=NetworkConfig().channels)
+    parser.add_argument("--stage", help="the schedule stage this run is (recorded when done)")
+    for name, value in asdict(TrainConfig()).items():
+        parser.add_argument(f"--{name.replace('_', '-')}", type=type(value), default=value)
+    args = parser.parse_args(argv)
+    cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
+    if os.environ.get("MOTION_SMOKE"):
+        cfg.steps, cfg.val_every = 3, 2
+    trainer = Trainer(cfg, NetworkConfig(channels=args.channels), args.threads)
+    if args.resume:
+        trainer.load(args.out, optimiser=True)
+    elif args.init:
+        trainer.load(args.init, optimiser=False)
+        trainer.step = 0
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(args.log))
+    saved = trainer.rng, trainer.val_pairs.rng
+    trainer.rng = trainer.val_pairs.rng = np.random.default_rng(12345)
+    val = [trainer.batch(trainer.val_pairs) for _ in range(8)]
+    trainer.rng, trainer.val_pairs.rng = saved
+    started = last_save = time.time()
+    first_step = trainer.step
+    while trainer.step < cfg.steps:
+        terms = trainer.train_step()
+        if trainer.step % 50 == 0:
+            for k, v in terms.items():
+                writer.add_scalar(f"train/{k}", v, trainer.step)
+        if trainer.step % cfg.val_every == 0 or trainer.step == cfg.steps:
+            scores = trainer.validate(val)
+            for k, v in scores.items():
+                writer.add_scalar(f"val/{k}", v, trainer.step)
+            rate = (trainer.step - first_step) / max(time.time() - started, 1e-9)
+            print(f"step {trainer.step} " + " ".join(f"{k} {v:.4f}" for k, v in scores.items())
+                  + f" ({rate:.2f} steps/s)", flush=True)  # fmt: skip
+        out_of_time = args.max_minutes and time.time() - started > 60 * args.max_minutes
+        if time.time() - last_save > 60 * cfg.checkpoint_minutes or out_of_time:
+            trainer.save(args.out)
+            last_save = time.time()
+        if out_of_time:
+            break
+    trainer.save(args.out, finished=args.stage if trainer.step >= cfg.steps else None)
+    writer.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
