@@ -21,8 +21,9 @@ freezes nor drifts. Losses: rotation/root features, forward-kinematics positions
 leg lengths), Laban effort (angular-velocity energy per window, log ratio), foot skating
 under ground-truth contacts, genre cross-entropy. Whole songs are held out by take.
 
-Writes ``checkpoints/dance.pt`` (weights, optimiser, step, config and the feature statistics:
-one file), TensorBoard scalars in ``runs/dance``; ``MOTION_SMOKE=1`` stops after a few steps.
+Writes ``checkpoints/dance.pt`` (weights, step, config and the feature statistics: what an
+export needs) and the optimiser beside it in ``dance.pt.state`` (for ``--resume``, never
+committed), TensorBoard scalars in ``runs/dance``; ``MOTION_SMOKE=1`` stops after a few steps.
 """
 
 from __future__ import annotations
@@ -400,7 +401,6 @@ def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best
     torch.save(
         {
             "model": model.state_dict(),
-            "optimiser": optimiser.state_dict(),
             "step": step,
             "net_config": dataclasses.asdict(model.config),
             "train_config": config,
@@ -412,6 +412,12 @@ def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best
         tmp,
     )
     os.replace(tmp, path)
+    torch.save(optimiser.state_dict(), tmp)
+    os.replace(tmp, optimiser_path(path))
+
+
+def optimiser_path(checkpoint: Path) -> Path:
+    return checkpoint.with_name(checkpoint.name + ".state")
 
 
 def load_checkpoint(path: Path = CHECKPOINT) -> tuple[DanceNet, DF.DanceStats, dict]:
@@ -485,8 +491,8 @@ def train(args: argparse.Namespace) -> None:
         poses = start_poses(train_seqs)
     losses = Losses(stats)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
-    if ckpt is not None:
-        optimiser.load_state_dict(ckpt["optimiser"])
+    if ckpt is not None and optimiser_path(args.checkpoint).exists():
+        optimiser.load_state_dict(torch.load(optimiser_path(args.checkpoint), weights_only=False))
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
