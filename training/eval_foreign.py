@@ -59,6 +59,7 @@ unchanged.
 from __future__ import annotations
 
 import argparse
+import ast
 import hashlib
 import inspect
 import json
@@ -76,9 +77,9 @@ from motion import kinematics as K
 from motion import rotations as rot
 from motion.skeleton import Motion
 from motion.styles import canonical_style
+from training import judges
 from training.judges import (
     ConvClipClassifier,
-    classifier_code_key,
     frame_features,
     load_engine,
     skating,
@@ -341,19 +342,47 @@ def train_judge(clips: list) -> StyleJudge:
     return judge
 
 
-def judge_for(clips: list, cache: Path | None) -> StyleJudge:
-    """:func:`train_judge`, kept in ``cache`` under a hash of the code that makes it and
-    of the takes: labels and the canonical motion itself (``training.data``'s clip cache
-    does not notice when retargeting changes)."""
-    if cache is None:
-        return train_judge(clips)
-    key = hashlib.sha256(classifier_code_key().encode())
-    for part in (train_judge, action_group, StyleJudge, canonical_style):
+def motion_sources(*modules: str) -> list[Path]:
+    """The files of ``motion`` modules ``modules`` and of every ``motion`` module they import,
+    found by reading their imports."""
+    seen, todo = set(), list(modules)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        for node in ast.walk(ast.parse((REPO / "motion" / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module == "motion":
+                todo += [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("motion."):
+                todo.append(node.module.split(".")[1])
+            elif isinstance(node, ast.Import):
+                todo += [a.name.split(".")[1] for a in node.names if a.name.startswith("motion.")]
+    return sorted(REPO / "motion" / f"{name}.py" for name in seen)
+
+
+def judge_key(clips: list) -> str:
+    """What a trained judge depends on: the code that makes it (this module's, the features
+    and the classifier of ``training.judges``, and the ``motion`` modules they read motion
+    through) and the takes (labels and the canonical motion itself: ``training.data``'s clip
+    cache does not notice when retargeting changes). Other edits keep a cached judge."""
+    key = hashlib.sha256()
+    for part in (frame_features, ConvClipClassifier, train_judge, action_group, StyleJudge):
         key.update(inspect.getsource(part).encode())
+    key.update(repr((judges.WINDOW, judges.HOP, judges._MIRROR, judges._BODY_MIRROR)).encode())
+    for path in motion_sources("features", "canonical", "styles"):
+        key.update(path.read_bytes())
     for c in sorted(clips, key=lambda c: c.take):
         key.update(json.dumps([c.take, c.style, c.content]).encode())
         key.update(np.ascontiguousarray(c.lrot).tobytes() + np.ascontiguousarray(c.root).tobytes())
-    path = Path(cache) / f"foreign-judge-{key.hexdigest()[:16]}.pkl"
+    return key.hexdigest()
+
+
+def judge_for(clips: list, cache: Path | None) -> StyleJudge:
+    """:func:`train_judge`, kept in ``cache`` under :func:`judge_key`."""
+    if cache is None:
+        return train_judge(clips)
+    path = Path(cache) / f"foreign-judge-{judge_key(clips)[:16]}.pkl"
     if path.exists():
         with path.open("rb") as f:
             return pickle.load(f)

@@ -13,8 +13,6 @@ trained on them, foot sliding, and the shipped engines run as the service runs t
 
 from __future__ import annotations
 
-import hashlib
-import inspect
 from pathlib import Path
 
 import numpy as np
@@ -202,19 +200,6 @@ class ClipClassifier:
     def predict(self, features: np.ndarray) -> str:
         logp = np.log(np.clip(self.model.predict_proba(features), 1e-12, 1.0)).mean(axis=0)
         return str(self.classes[int(np.argmax(logp))])
-
-
-def classifier_code_key() -> str:
-    """A hash of the code that makes the classifiers (the features, the classifiers and
-    the ``motion`` package they read motion through), so that an evaluation keeps a cached
-    classifier while what judges is unchanged and trains it again otherwise."""
-    key = hashlib.sha256()
-    for part in (window_features, frame_features, ConvClipClassifier, ClipClassifier):
-        key.update(inspect.getsource(part).encode())
-    key.update(repr((WINDOW, HOP, _MIRROR, _BODY_MIRROR)).encode())
-    for path in sorted((REPO / "motion").glob("*.py")):
-        key.update(path.read_bytes())
-    return key.hexdigest()
 
 
 # --------------------------------------------------------------------------- families

@@ -214,6 +214,26 @@ def test_log_probabilities_rank_the_classes_the_prediction_takes():
     assert clf.classes[int(np.argmax(logp))] == clf.predict(feats[2])
 
 
+def test_a_cached_judge_is_kept_for_the_same_code_and_motion_and_only_for_them():
+    from dataclasses import replace
+
+    from training.data import clip_from_motion
+
+    clips = [
+        clip_from_motion(swinging(hz=hz), name=n, dataset="d", take=n, style=s, content="walk")
+        for n, hz, s in (("a", 1.0, "old"), ("b", 1.5, "happy"))
+    ]
+    key = EF.judge_key(clips)
+    assert EF.judge_key(list(reversed(clips))) == key
+    moved = clips[0].root.copy()
+    moved[5, 1] += 0.01  # a retargeting change the clip cache would not notice
+    assert EF.judge_key([replace(clips[0], root=moved), clips[1]]) != key
+    assert EF.judge_key([replace(clips[0], style="sad"), clips[1]]) != key
+    read = {p.name for p in EF.motion_sources("features", "canonical", "styles")}
+    assert {"features.py", "kinematics.py", "rotations.py", "styles.py"} <= read
+    assert not {"audio.py", "retarget.py", "gltf.py"} & read  # their edits keep the judge
+
+
 def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch):
     """:func:`evaluate` with both shipped families on one item of the test half and a judge
     trained a few steps (a full run's took 51 minutes on two busy cores), its tables and its
