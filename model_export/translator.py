@@ -318,6 +318,7 @@ def main(argv: list[str] | None = None) -> dict:
         "extra": {
             "paper": "aberman2020 (style codes from clips and video), trained on aligned pairs",
             "step": step,
+            "schedule_stages": list(payload.get("stages", [])),
             "stats": f"{FOLDER}/stats.npz",
             "styles_file": f"{FOLDER}/styles.npz",
             "window": int(payload["train"]["window"]),

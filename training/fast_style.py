@@ -42,7 +42,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     who = p.add_mutually_exclusive_group(required=True)
     who.add_argument("--style", action="append", help="style name (repeatable)")
     who.add_argument("--all", action="store_true", help="every style of the shipped translator")
-    p.add_argument("--steps", type=int, default=1500, help="steps per style")
+    p.add_argument("--steps", type=int, default=1000, help="steps per style")
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many (smoke)")
     p.add_argument("--minutes-per-style", type=float, default=None)
     p.add_argument("--batch", type=int, default=16)
@@ -104,8 +104,10 @@ def targets(
             bounds = np.concatenate([[0], np.cumsum(z["lengths"])])
             split = [(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
             if set(names) <= set(json.loads(str(z["styles"]))):
-                content = [z["content"][a:b] for a, b in split]
-                return content, {s: [z[f"style_{s}"][a:b] for a, b in split] for s in names}
+                # each array read once (z[key] decompresses it again), then cut per clip
+                arrays = {key: z[key] for key in ("content", *(f"style_{s}" for s in names))}
+                content = [arrays["content"][a:b] for a, b in split]
+                return content, {s: [arrays[f"style_{s}"][a:b] for a, b in split] for s in names}
     clips = teacher_clips()
     content = [FF.encode(c.motion).features for c in clips]
     out: dict[str, list[np.ndarray]] = {}

@@ -6,9 +6,10 @@ engines to several styles, drawn as stick-figure film strips in one SVG.
 
 Rows: the clip unchanged, then each style through the translator and through the fast
 networks; columns: poses at evenly spaced times over the same share of each clip (a
-style's time warp makes its clip longer or shorter), seen from the character's left.
-Each figure is drawn relative to its own hips on the floor, so posture and reach compare
-across a row. Left limbs blue, right limbs red.
+style's time warp makes its clip longer or shorter), each seen from the character's left
+and from its front. Each figure is drawn relative to its own hips on the floor, so posture
+and reach compare across a row. Left limbs blue, right limbs red. A first frame in T-pose
+(cgspeed's CMU conversions start with one) is left out of the picture.
 """
 
 from __future__ import annotations
@@ -26,9 +27,10 @@ from motion.skeleton import Motion
 
 REPO = Path(__file__).resolve().parent.parent
 STYLES = ("elderly", "angry", "proud", "childish", "feminine")
-COLUMNS = 8
-CELL = 90  # pixels per figure
-SCALE = CELL * 0.45 / Fe.LEG  # pixels per canonical unit: a leg is 45% of a cell
+COLUMNS = 6
+CELL = 120  # pixels: a figure's height, and the width of its two views
+SCALE = CELL * 0.42 / Fe.LEG  # pixels per canonical unit: a leg is 42% of a cell
+LABEL = 150  # pixels left of the first figure
 
 
 def canonical_clip(path: Path) -> Motion:
@@ -37,48 +39,71 @@ def canonical_clip(path: Path) -> Motion:
     return retarget.to_canonical(motion, retarget.make_rig(motion.skeleton, motion))
 
 
-def side_view(motion: Motion, frames: np.ndarray) -> np.ndarray:
-    """``(len(frames), 22, 2)`` joint positions seen from the character's left (x forward,
-    y up), relative to the hips on the floor, in canonical units."""
+def views(motion: Motion, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joint positions ``(len(frames), 22, 2)`` seen from the character's left (x forward,
+    y up) and from its front (x its left), relative to the hips on the floor, in canonical
+    units."""
     gpos = K.global_positions(motion)
     face = Fe.facing(gpos)
     local = K.root_local(gpos, gpos[:, C.INDEX["Hips"]], face)[frames]
-    return np.stack([local[..., 2], local[..., 1]], axis=-1)
+    side = np.stack([local[..., 2], local[..., 1]], axis=-1)
+    front = np.stack([local[..., 0], local[..., 1]], axis=-1)
+    return side, front
+
+
+def is_t_pose(motion: Motion, frame: int = 0) -> bool:
+    """Both arms straight out sideways at ``frame`` (hands level with the shoulders and
+    farther apart than 1.2 leg lengths)."""
+    gpos = K.global_positions(motion)[frame]
+    hands = gpos[C.INDEX["Hand_L"]], gpos[C.INDEX["Hand_R"]]
+    shoulders = gpos[C.INDEX["UpperArm_L"]], gpos[C.INDEX["UpperArm_R"]]
+    level = all(abs(h[1] - s[1]) < 0.15 * Fe.LEG for h, s in zip(hands, shoulders, strict=True))
+    return level and np.linalg.norm(hands[0] - hands[1]) > 1.2 * Fe.LEG
 
 
 def _limb_colour(joint: str) -> str:
     return "#2563eb" if joint.endswith("_L") else "#dc2626" if joint.endswith("_R") else "#111"
 
 
-def strip(poses: np.ndarray, y0: float, label: str) -> list[str]:
-    """SVG elements of one row: a label and a stick figure per pose."""
-    out = [f'<text x="8" y="{y0 + CELL / 2:.0f}" font-size="13">{label}</text>']
-    for k, pose in enumerate(poses):
-        cx, floor = 150 + k * CELL + CELL / 2, y0 + CELL - 6
-        pts = np.stack([cx + SCALE * pose[:, 0], floor - SCALE * pose[:, 1]], axis=-1)
-        for j, p in enumerate(C.PARENTS):
-            if p <= 0:
-                continue
-            (x1, y1), (x2, y2) = pts[p], pts[j]
-            out.append(
-                f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" '
-                f'stroke="{_limb_colour(C.JOINTS[j])}" stroke-width="2"/>'
-            )
+def figure(pose: np.ndarray, cx: float, floor: float) -> list[str]:
+    """SVG lines of one stick figure ``(22, 2)`` standing at ``cx`` on ``floor``."""
+    out = []
+    pts = np.stack([cx + SCALE * pose[:, 0], floor - SCALE * pose[:, 1]], axis=-1)
+    for j, p in enumerate(C.PARENTS):
+        if p <= 0:
+            continue
+        (x1, y1), (x2, y2) = pts[p], pts[j]
         out.append(
-            f'<line x1="{cx - CELL / 2 + 4:.0f}" y1="{floor:.0f}" x2="{cx + CELL / 2 - 4:.0f}" '
+            f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" '
+            f'stroke="{_limb_colour(C.JOINTS[j])}" stroke-width="2"/>'
+        )
+    return out
+
+
+def strip(side: np.ndarray, front: np.ndarray, y0: float, label: str) -> list[str]:
+    """SVG elements of one row: a label and, per pose, its side and front views."""
+    out = [f'<text x="8" y="{y0 + CELL / 2:.0f}" font-size="13">{label}</text>']
+    for k in range(len(side)):
+        left, floor = LABEL + k * CELL, y0 + CELL - 6
+        out += figure(side[k], left + CELL * 0.27, floor)
+        out += figure(front[k], left + CELL * 0.7, floor)
+        out.append(
+            f'<line x1="{left + 4:.0f}" y1="{floor:.0f}" x2="{left + CELL - 4:.0f}" '
             f'y2="{floor:.0f}" stroke="#ccc"/>'
         )
     return out
 
 
 def render(rows: list[tuple[str, Motion]], title: str) -> str:
-    """An SVG document of film strips, one per ``(label, canonical motion)``."""
+    """An SVG document of film strips, one per ``(label, canonical motion)``, the content
+    first."""
     height = 40 + CELL * len(rows)
-    width = 150 + CELL * COLUMNS + 10
+    width = LABEL + CELL * COLUMNS + 10
     body = [f'<text x="8" y="22" font-size="15" font-weight="bold">{title}</text>']
+    first = 1 if is_t_pose(rows[0][1]) else 0  # the content's, for every row
     for r, (label, motion) in enumerate(rows):
-        frames = np.linspace(0, motion.num_frames - 1, COLUMNS).round().astype(int)
-        body += strip(side_view(motion, frames), 30 + r * CELL, label)
+        frames = np.linspace(first, motion.num_frames - 1, COLUMNS).round().astype(int)
+        body += strip(*views(motion, frames), 30 + r * CELL, label)
     return (
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
         f'font-family="sans-serif"><rect width="100%" height="100%" fill="white"/>'
@@ -103,7 +128,9 @@ def main(argv: list[str] | None = None) -> int:
         for family, engine in engines.items():
             rows.append((f"{style} ({family})", E.transfer(family, engine, content, style)))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(render(rows, f"{args.clip}, restyled (seen from the left)"))
+    args.out.write_text(
+        render(rows, f"{args.clip}, restyled (each pose from the left and from the front)")
+    )
     print(f"wrote {args.out}")
     return 0
 

@@ -275,12 +275,12 @@ def test_named_styles_warp_by_speed_whatever_the_content(shared_client, walk):
 @needs_model
 def test_a_clip_restyled_to_the_named_style_it_is_in_keeps_its_timing(shared_client):
     """A not-confident walk (the slowest style) restyled "not-confident" is not slowed
-    further, nor a masculinity walk sped up; to another style it warps by the ratio of the
+    further, nor a childish walk (a fast style) sped up; to another style it warps by the ratio of the
     two styles' speeds."""
     speed = speeds()
     for clip, style in [
         ("dataset-1_walk_not-confident_002", "not-confident"),
-        ("dataset-1_walk_masculinity_002", "masculine"),  # masculinity is its alias
+        ("dataset-1_walk_childish_002", "childish"),
     ]:
         content = bandai(clip)
         nearest = nearest_style(shared_client, content)
