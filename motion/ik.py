@@ -30,6 +30,9 @@ SOFT_REACH = 0.05  # ...easing in over the last 5% of it
 # enough to leave a gait's bob alone, fast enough to follow a crouch.
 GROUNDING_SECONDS = 0.5
 TOE_LIFT_SECONDS = 0.1  # Gaussian sigma of the ankle turn that lifts a dipping toe
+# A foot in the air is raised to the content's height over its floor, up to this share of
+# the leg (4 cm on the canonical body): enough to clear the floor, no more.
+SWING_CLEARANCE = 0.05
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
@@ -405,33 +408,47 @@ def pin_feet(
             levels[toe] if toe is not None else levels[ankle],
             blend,
         )
-        moved = np.any(offsets != 0.0, axis=-1)
-        if not moved.any():
-            continue
-        f = np.nonzero(moved)[0]
-        pos = gpos[f]
-        pole = _knee_poles(
-            grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
-            None if toe is None else gpos[:, toe],
-        )[f]  # fmt: skip
-        target = _within_reach(pos[:, hip], pos[:, knee], pos[:, ankle], pos[:, ankle] + offsets[f])
-        leg_ik = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, pole, REACH_EPS)
-
-        # new global rotations along the leg; the ankle keeps its own
-        new_grot = {}
-        for j in _chain(parents, hip, knee):
-            new_grot[j] = rot.mul(leg_ik.hip_turn, grot[f, j])
-        shin_turn = rot.mul(leg_ik.knee_turn, leg_ik.hip_turn)
-        for j in _chain(parents, knee, ankle):
-            new_grot[j] = rot.mul(shin_turn, grot[f, j])
-        new_grot[ankle] = grot[f, ankle]
-        for j, g in new_grot.items():
-            p = int(parents[j])
-            parent_rot = new_grot.get(p, grot[f, p])
-            local = rot.mul(rot.inv(parent_rot), g)
-            # keep the old quaternion's sign so the clip stays continuous
-            lrot[f, j] = np.where(_dot(local, lrot[f, j]) < 0, -local, local)
+        _move_ankles(lrot, grot, gpos, parents, (hip, knee, ankle, toe), offsets)
     return motion.replace(lrot=lrot)
+
+
+def _move_ankles(
+    lrot: np.ndarray,
+    grot: np.ndarray,
+    gpos: np.ndarray,
+    parents: np.ndarray,
+    leg: tuple[int, int, int, int | None],
+    offsets: np.ndarray,
+) -> None:
+    """Moves ``leg``'s ankle by ``offsets (F, 3)`` where they are not zero, by leg IK, in
+    ``lrot`` (in place; ``grot``/``gpos`` its forward kinematics before). Hip and knee
+    turn; the ankle keeps its global rotation; the knee bends the way it bends."""
+    hip, knee, ankle, toe = leg
+    f = np.nonzero(np.any(offsets != 0.0, axis=-1))[0]
+    if not len(f):
+        return
+    pos = gpos[f]
+    pole = _knee_poles(
+        grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
+        None if toe is None else gpos[:, toe],
+    )[f]  # fmt: skip
+    target = _within_reach(pos[:, hip], pos[:, knee], pos[:, ankle], pos[:, ankle] + offsets[f])
+    leg_ik = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, pole, REACH_EPS)
+
+    # new global rotations along the leg; the ankle keeps its own
+    new_grot = {}
+    for j in _chain(parents, hip, knee):
+        new_grot[j] = rot.mul(leg_ik.hip_turn, grot[f, j])
+    shin_turn = rot.mul(leg_ik.knee_turn, leg_ik.hip_turn)
+    for j in _chain(parents, knee, ankle):
+        new_grot[j] = rot.mul(shin_turn, grot[f, j])
+    new_grot[ankle] = grot[f, ankle]
+    for j, g in new_grot.items():
+        p = int(parents[j])
+        parent_rot = new_grot.get(p, grot[f, p])
+        local = rot.mul(rot.inv(parent_rot), g)
+        # keep the old quaternion's sign so the clip stays continuous
+        lrot[f, j] = np.where(_dot(local, lrot[f, j]) < 0, -local, local)
 
 
 CANONICAL_LEGS = [
@@ -476,7 +493,47 @@ def pin_canonical_feet(
     )
     if floor_of is None:
         return pinned
-    return lift_toes(pinned, levels, contacts[:, [1, 3]], CANONICAL_LEGS)
+    cap = SWING_CLEARANCE * C.leg_length()
+    clearance = np.minimum(np.maximum(gpos[:, feet, 1] - found[None], 0.0), cap)
+    raised = lift_swing_feet(pinned, levels, contacts, clearance[:, [0, 2]])
+    return lift_toes(raised, levels, contacts[:, [1, 3]], CANONICAL_LEGS, clearance[:, [1, 3]])
+
+
+def lift_swing_feet(
+    motion: Motion,
+    levels: dict[int, float],
+    contacts: np.ndarray,
+    clearance: np.ndarray,
+    sigma_seconds: float = TOE_LIFT_SECONDS,
+) -> Motion:
+    """A canonical ``motion`` with each ankle that hangs lower over its ground level in
+    ``levels`` than ``clearance (F, 2)`` (left, right) while ``contacts (F, 4)`` (as
+    :func:`pin_canonical_feet`'s) have its heel and toe in the air raised to it by leg IK,
+    smoothly (Gaussian, ``sigma_seconds``); planted frames are left alone.
+
+    A restyled leg often swings its foot lower than the content's: the foot then skims
+    the floor, which reads as sliding (on the foreign evaluation's development half, the
+    translator's feet slid 0.2-3.6 cm/s while the content had them planted and 3-35 cm/s
+    while it had them in the air)."""
+    contacts = np.asarray(contacts, dtype=bool)
+    if contacts.shape != (motion.num_frames, 4) or clearance.shape != (motion.num_frames, 2):
+        raise MotionError(f"contacts (F, 4) and clearance (F, 2) for {motion.num_frames} frames")
+    parents = motion.skeleton.parents
+    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(CANONICAL_LEGS))
+    lrot = motion.lrot.copy()
+    sigma = sigma_seconds * motion.fps
+    for i, leg in enumerate(CANONICAL_LEGS):
+        ankle = leg[2]
+        planted = contacts[:, 2 * i] | contacts[:, 2 * i + 1]
+        low = np.clip(levels[ankle] + clearance[:, i] - gpos[:, ankle, 1], 0.0, None)
+        low[planted] = 0.0
+        widened = maximum_filter1d(low, 2 * int(np.ceil(2 * sigma)) + 1, mode="nearest")
+        lift = gaussian_filter1d(widened, sigma, mode="nearest")
+        lift[planted | (lift < 1e-6)] = 0.0
+        offsets = np.zeros((motion.num_frames, 3))
+        offsets[:, 1] = lift
+        _move_ankles(lrot, grot, gpos, parents, leg, offsets)
+    return motion.replace(lrot=lrot)
 
 
 def lift_toes(
@@ -484,10 +541,12 @@ def lift_toes(
     levels: dict[int, float],
     toe_contacts: np.ndarray,
     legs: list[tuple[int, int, int, int | None]],
+    clearance: np.ndarray | None = None,
     sigma_seconds: float = TOE_LIFT_SECONDS,
 ) -> Motion:
     """``motion`` with each toe that dips under its ground level in ``levels`` (joint ->
-    height) while ``toe_contacts (F, len(legs))`` have it in the air turned up onto it by
+    height; plus ``clearance (F, len(legs))`` when given) while ``toe_contacts (F,
+    len(legs))`` have it in the air turned up onto it by
     its ankle, smoothly (Gaussian, ``sigma_seconds``); ankles stay where they are, and
     planted toes are left to :func:`pin_feet` but for the ramp into and out of a dip
     next to them. The translator's decoder pitches some feet
@@ -507,11 +566,21 @@ def lift_toes(
     for i, (_, _, ankle, toe) in enumerate(legs):
         if toe is None:
             continue
-        under = np.where(toe_contacts[:, i], 0.0, np.clip(levels[toe] - gpos[:, toe, 1], 0, None))
+        air = ~toe_contacts[:, i]
+        under = np.where(air, np.clip(levels[toe] - gpos[:, toe, 1], 0, None), 0.0)
         # widened before smoothing, so that a dip's deepest frame is lifted (almost) whole
         sigma = sigma_seconds * motion.fps
-        widened = maximum_filter1d(under, 2 * int(np.ceil(2 * sigma)) + 1, mode="nearest")
-        lift = gaussian_filter1d(widened, sigma, mode="nearest")
+        size = 2 * int(np.ceil(2 * sigma)) + 1
+        lift = gaussian_filter1d(
+            maximum_filter1d(under, size, mode="nearest"), sigma, mode="nearest"
+        )
+        if clearance is not None:  # the rest of the way up to it, in the air only
+            short = np.where(
+                air, np.clip(levels[toe] + clearance[:, i] - gpos[:, toe, 1], 0, None), 0.0
+            )
+            widened = maximum_filter1d(short - under, size, mode="nearest")
+            extra = gaussian_filter1d(widened, sigma, mode="nearest")
+            lift += np.where(air, extra, 0.0)
         f = np.nonzero(lift > 1e-6)[0]
         if not len(f):
             continue

@@ -7,7 +7,8 @@ of ``BUCKET`` frames, so onnxruntime sees few shapes and short clips still fill 
 receptive field) -> style network -> projection -> raw features -> global positions (the
 content's root trajectory, so the path is kept exactly) -> joint rotations by
 ``motion.fit.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
-where the content's feet are planted (``motion.ik.pin_canonical_feet``).
+where the content's feet are planted, on the content's floor, and lifted clear of it where
+the content's are in the air (``motion.ik.pin_canonical_feet`` with ``floor_of``).
 """
 
 from __future__ import annotations
@@ -158,7 +159,8 @@ class FastEngine(Engine):
 
     def _motion(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Motion:
         """The network's features -> a canonical motion: the content's root trajectory,
-        joint rotations fitted to the positions, feet pinned where the content's are."""
+        joint rotations fitted to the positions, feet pinned where the content's are, on its
+        floor, and clear of it where the content's are in the air."""
         canon, enc = job.canon, job.features
         with timer.stage("positions"):
             frames = canon.num_frames
@@ -171,7 +173,7 @@ class FastEngine(Engine):
         if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
                 contacts = enc.features[:, FF.CONTACTS] > 0.5
-                motion = ik.pin_canonical_feet(motion, contacts)
+                motion = ik.pin_canonical_feet(motion, contacts, floor_of=canon)
         return motion
 
     def stylize(

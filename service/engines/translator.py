@@ -16,7 +16,8 @@ A transfer: restyle with the target code; at a ``strength`` below 1, each joint'
 goes that part of the way from the content's own to the restyled one (0 gives the content
 back); the content's root trajectory
 (``features.decode_motion``); the hips raised or lowered so that the feet planted where the
-CONTENT's are stand on the content's floor, then held there (``ik.pin_canonical_feet``);
+CONTENT's are stand on the content's floor, then held there, and the feet the content has
+in the air kept clear of the floor (``ik.pin_canonical_feet``);
 then the time warp, to the power ``strength`` and clamped to [``MIN_WARP``, ``MAX_WARP``]:
 for a style clip the ratio of velocity factors (style over content, aberman2020); for a
 named style or mix the style's speed against the other styles on the same action

@@ -471,6 +471,35 @@ def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
         ik.lift_toes(fixture_walk, levels, toes[1:], ik.CANONICAL_LEGS)
 
 
+def test_a_swinging_foot_skimming_the_floor_is_raised_to_the_contents_clearance(fixture_walk):
+    """The walk's hips lowered by 5 cm: its feet in the air skim (or sink under) the floor.
+    Against the walk as the floor and clearance (capped at SWING_CLEARANCE of the leg), the
+    swinging ankles come back up to it; planted frames are untouched."""
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    walk = K.global_positions(fixture_walk)
+    feet = CT.CANONICAL_FOOT_JOINTS
+    cap = ik.SWING_CLEARANCE * C.leg_length()
+    clearance = np.minimum(walk[:, feet, 1] - _foot_levels(fixture_walk)[None], cap)
+    low = _hips_raised(fixture_walk, -5.0)
+    raised = ik.lift_swing_feet(low, levels, contacts, clearance[:, [0, 2]])
+    before, after = K.global_positions(low), K.global_positions(raised)
+    for i, (_, _, ankle, _) in enumerate(ik.CANONICAL_LEGS):
+        planted = contacts[:, 2 * i] | contacts[:, 2 * i + 1]
+        np.testing.assert_allclose(after[planted, ankle], before[planted, ankle], atol=1e-6)
+        want = levels[ankle] + clearance[:, i]
+        short_before = np.clip(want - before[:, ankle, 1], 0, None)[~planted]
+        short_after = np.clip(want - after[:, ankle, 1], 0, None)[~planted]
+        assert short_before.sum() > 20.0  # cm over the clip: the case is real
+        assert short_after.sum() < 0.1 * short_before.sum()  # edges of a swing keep a little
+        assert (after[:, ankle, 1] >= before[:, ankle, 1] - 1e-6).all()  # never pushed down
+        np.testing.assert_allclose(  # only up: the foot's path over the floor stays
+            after[:, ankle][:, [0, 2]], before[:, ankle][:, [0, 2]], atol=0.5
+        )
+    with pytest.raises(MotionError, match="clearance"):
+        ik.lift_swing_feet(low, levels, contacts, clearance[1:, [0, 2]])
+
+
 # --------------------------------------------------------------------------- fit_positions
 
 
