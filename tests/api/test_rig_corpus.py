@@ -66,7 +66,9 @@ def test_transfer_and_stylize_keep_the_rig(shared_client, corpus, name):
     assert body["rig"]["method"] == item.method and 0 < body["rig"]["confidence"] <= 1
     mapped = {k: item.origin.get(v) for k, v in body["rig"]["mapping"].items()}
     assert mapped["UpperLeg_L"] == "LeftUpLeg" and mapped["Hand_R"] == "RightHand"
-    r = shared_client.post("/v1/stylize", files=content, data={"style_name": styles("fast")[-1]})
+    r = shared_client.post(
+        "/v1/stylize", files=content, data={"style_name": styles("fast")[-1], "time_warp": "false"}
+    )
     assert r.status_code == 200, r.text[:500]
     assert_same_rig(r.text, sent)
 
@@ -165,7 +167,8 @@ def test_every_shared_skeleton_goes_through_every_endpoint(shared_client):
         )
         assert r.status_code == 200, (name, r.text[:300])
         assert_same_rig(r.text, sent)
-        r = shared_client.post("/v1/stylize", files=content, data={"style_name": styles("fast")[1]})
+        fields = {"style_name": styles("fast")[1], "time_warp": "false"}  # frames kept
+        r = shared_client.post("/v1/stylize", files=content, data=fields)
         assert r.status_code == 200, (name, r.text[:300])
         assert_same_rig(r.text, sent)
         r = shared_client.post("/v1/style-code", files={"style": ("s.bvh", sent, "text/plain")})

@@ -10,6 +10,7 @@ import pytest
 
 from motion import bvh
 from service.config import Settings
+from service.engines.translator import MAX_WARP, MIN_WARP
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
 from tests.rigs import FIXTURE
@@ -33,10 +34,11 @@ pytestmark = pytest.mark.skipif(not STYLES, reason="no fast models shipped in mo
 
 
 def post(client, data: bytes, style: str, name: str = "clip.bvh", query: str = "", **fields):
+    """A stylize request; no time warp unless ``time_warp`` is given, so frames are kept."""
     return client.post(
         "/v1/stylize" + query,
         files={"content": (name, data, "text/plain")},
-        data={"style_name": style, **fields},
+        data={"style_name": style, "time_warp": "false", **fields},
     )
 
 
@@ -170,3 +172,33 @@ def test_too_many_frames_is_413(make_client, walk):
     client = make_client(Settings(max_frames=10))
     body = assert_problem(post(client, walk, STYLES[0]), 413, "too-large")
     assert body["limit"] == 10
+
+
+def fast_speeds() -> dict[str, float]:
+    doc = json.loads((Settings().models_dir / "manifest.json").read_text())
+    entry = next(m for m in doc["models"] if m["family"] == "fast")
+    return {name: info["speed"] for name, info in entry["extra"]["styles"].items()}
+
+
+def test_a_named_style_plays_at_its_speed(shared_client, walk):
+    """By default the result plays at the style's speed against the other styles on the same
+    actions (the translator's, clamped to 0.5-2x): a sad walk is longer, an angry one
+    shorter; the path is the same."""
+    frames = bvh.loads(walk).num_frames
+    speeds = fast_speeds()
+    for style in ("sad", "angry"):
+        factor = min(max(speeds[style], MIN_WARP), MAX_WARP)
+        assert abs(np.log(factor)) > 0.2  # the case is real
+        r = post(shared_client, walk, style, time_warp="true")
+        assert r.status_code == 200, r.text
+        assert r.headers["x-frames"] == str(round((frames - 1) / factor) + 1)
+        still = bvh.loads(post(shared_client, walk, style).text)
+        warped = bvh.loads(r.text)
+        np.testing.assert_allclose(warped.lpos[-1, 0], still.lpos[-1, 0], atol=1e-3)
+
+
+def test_the_other_names_of_a_style_give_the_same_result(shared_client, walk):
+    """Bandai dataset 1's names (old, tired, masculinity) are the merged styles' other names."""
+    for alias, style in (("old", "elderly"), ("tired", "exhausted"), ("masculinity", "masculine")):
+        assert post(shared_client, walk, alias).text == post(shared_client, walk, style).text
+    assert "old" not in {s["name"] for s in shared_client.get("/v1/styles").json()["fast"]}
