@@ -499,6 +499,13 @@ def pin_canonical_feet(
     return lift_toes(raised, levels, contacts[:, [1, 3]], CANONICAL_LEGS, clearance[:, [1, 3]])
 
 
+def _widened_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
+    """``x (F,)`` widened by a running maximum over 4 sigma, then Gaussian-smoothed: a
+    peak's frame keeps (almost) its whole value and the change ramps in and out."""
+    size = 2 * int(np.ceil(2 * sigma)) + 1
+    return gaussian_filter1d(maximum_filter1d(x, size, mode="nearest"), sigma, mode="nearest")
+
+
 def lift_swing_feet(
     motion: Motion,
     levels: dict[int, float],
@@ -527,8 +534,7 @@ def lift_swing_feet(
         planted = contacts[:, 2 * i] | contacts[:, 2 * i + 1]
         low = np.clip(levels[ankle] + clearance[:, i] - gpos[:, ankle, 1], 0.0, None)
         low[planted] = 0.0
-        widened = maximum_filter1d(low, 2 * int(np.ceil(2 * sigma)) + 1, mode="nearest")
-        lift = gaussian_filter1d(widened, sigma, mode="nearest")
+        lift = _widened_smooth(low, sigma)
         lift[planted | (lift < 1e-6)] = 0.0
         offsets = np.zeros((motion.num_frames, 3))
         offsets[:, 1] = lift
@@ -568,18 +574,13 @@ def lift_toes(
             continue
         air = ~toe_contacts[:, i]
         under = np.where(air, np.clip(levels[toe] - gpos[:, toe, 1], 0, None), 0.0)
-        # widened before smoothing, so that a dip's deepest frame is lifted (almost) whole
         sigma = sigma_seconds * motion.fps
-        size = 2 * int(np.ceil(2 * sigma)) + 1
-        lift = gaussian_filter1d(
-            maximum_filter1d(under, size, mode="nearest"), sigma, mode="nearest"
-        )
+        lift = _widened_smooth(under, sigma)  # a dip's deepest frame lifted (almost) whole
         if clearance is not None:  # the rest of the way up to it, in the air only
             short = np.where(
                 air, np.clip(levels[toe] + clearance[:, i] - gpos[:, toe, 1], 0, None), 0.0
             )
-            widened = maximum_filter1d(short - under, size, mode="nearest")
-            extra = gaussian_filter1d(widened, sigma, mode="nearest")
+            extra = _widened_smooth(short - under, sigma)
             lift += np.where(air, extra, 0.0)
         f = np.nonzero(lift > 1e-6)[0]
         if not len(f):

@@ -54,7 +54,7 @@ def views(motion: Motion, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def is_t_pose(motion: Motion, frame: int = 0) -> bool:
     """Both arms straight out sideways at ``frame`` (hands level with the shoulders and
     farther apart than 1.2 leg lengths)."""
-    gpos = K.global_positions(motion)[frame]
+    gpos = K.global_positions(motion.slice(frame, frame + 1))[0]
     hands = gpos[C.INDEX["Hand_L"]], gpos[C.INDEX["Hand_R"]]
     shoulders = gpos[C.INDEX["UpperArm_L"]], gpos[C.INDEX["UpperArm_R"]]
     level = all(abs(h[1] - s[1]) < 0.15 * Fe.LEG for h, s in zip(hands, shoulders, strict=True))
