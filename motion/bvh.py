@@ -27,7 +27,7 @@ from motion.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skelet
 _VALID_CHANNELS = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 _FRAMES_RE = re.compile(r"^frames\s*:?\s*(\S+)$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(r"^frame\s+time\s*:?\s*(\S+)$", re.IGNORECASE)
-_MAX_ABS_VALUE = 1e9  # offsets and channel values beyond this are damage, not motion
+MAX_ABS_VALUE = 1e9  # offsets and channel values beyond this are damage, not motion
 _MIN_FRAME_TIME = 1e-4  # 10,000 fps: no capture system records faster
 _MAX_DEPTH = 256  # real rigs nest < 100 deep; deeper would overflow recursive writers
 
@@ -105,7 +105,7 @@ def _parse_floats(tokens: list[str], n: int, line: int, what: str) -> list[float
         ) from None
     if not all(math.isfinite(v) for v in vals):
         raise MotionError(f"line {line}: {what} is not finite", line=line)
-    if any(abs(v) > _MAX_ABS_VALUE for v in vals):
+    if any(abs(v) > MAX_ABS_VALUE for v in vals):
         raise MotionError(f"line {line}: {what} has an absurdly large value", line=line)
     return vals
 
@@ -346,8 +346,8 @@ def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     if not finite.all():
         i = int(filled[np.flatnonzero(~finite.all(axis=1))[0]])
         raise MotionError(f"line {first_line + i}: a value is not finite", line=first_line + i)
-    if np.abs(values).max(initial=0.0) > _MAX_ABS_VALUE:
-        i = int(filled[np.flatnonzero((np.abs(values) > _MAX_ABS_VALUE).any(axis=1))[0]])
+    if np.abs(values).max(initial=0.0) > MAX_ABS_VALUE:
+        i = int(filled[np.flatnonzero((np.abs(values) > MAX_ABS_VALUE).any(axis=1))[0]])
         raise MotionError(f"line {first_line + i}: a value is absurdly large", line=first_line + i)
     return values
 

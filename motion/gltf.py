@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from motion import rotations as rot
+from motion.bvh import MAX_ABS_VALUE
 from motion.errors import MotionError
 from motion.skeleton import Motion, Skeleton
 
@@ -135,6 +136,9 @@ def _read(doc: _Document, max_frames: int, rest_if_unanimated: bool) -> Motion:
                 lpos[:, track.joint] = values
     lrot, lpos = _to_world_aligned(rig, lrot, lpos)
     offsets = _world_offsets(rig)
+    largest = max(np.abs(offsets).max(initial=0.0), np.abs(lpos).max(initial=0.0))
+    if largest > MAX_ABS_VALUE:  # as the BVH reader: so any clip read can be written as BVH
+        raise MotionError(f"a joint position of {largest:g} is absurdly large")
     # position channels where a joint leaves its rest offset (BVH output keeps them)
     moving = np.abs(lpos - offsets).max(axis=0).max(axis=-1) > 1e-6 * max(rig.height, 1e-6)
     channels = tuple(

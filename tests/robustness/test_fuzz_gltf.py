@@ -7,10 +7,12 @@ import copy
 import json
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from motion import gltf
+from motion.errors import MotionError
 from tests.gltf_files import embedded_gltf_bytes, glb_bytes, rig_gltf
 from tests.robustness.fuzzing import fuzz_settings
 from tests.robustness.test_fuzz_parsers import assert_valid_motion, parse_or_refuse
@@ -72,3 +74,14 @@ def test_gltf_mutated_binary(flips, cut) -> None:
     motion = parse_or_refuse(gltf.loads, bytes(data[:cut]), max_frames=5000)
     if motion is not None:
         assert_valid_motion(motion)
+
+
+def test_a_node_placed_absurdly_far_is_refused_as_in_bvh() -> None:
+    """A node translation of 2**31 (one of ODD_VALUES; the fuzzer found it on a fresh clone)
+    read as a clip the BVH reader would refuse to read back: refused with the same bound."""
+    doc = json.loads(json.dumps(SEED))
+    doc["nodes"][1]["translation"] = [2**31, 1.0, 0.0]
+    with pytest.raises(MotionError, match="absurdly large"):
+        gltf.loads(json.dumps(doc).encode())
+    doc["nodes"][1]["translation"] = [1e6, 1.0, 0.0]  # far, but a position: read and written
+    assert_valid_motion(gltf.loads(json.dumps(doc).encode()))
