@@ -29,9 +29,16 @@ def identity(shape: tuple[int, ...] = ()) -> np.ndarray:
 def normalize(q: np.ndarray) -> np.ndarray:
     """Unit quaternions ``(..., 4)``; zero quaternions become the identity."""
     q = np.asarray(q, dtype=np.float64)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    out = np.where(n > 1e-12, q / np.where(n > 1e-12, n, 1.0), IDENTITY)
-    return out
+    n = norm(q)[..., None]
+    if n.size and n.min() > 1e-12:  # the usual case: no zero quaternion to replace
+        return q / n
+    return np.where(n > 1e-12, q / np.where(n > 1e-12, n, 1.0), IDENTITY)
+
+
+def norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms ``(...)`` of vectors ``(..., n)``: ``np.linalg.norm(v, axis=-1)``
+    at a third of its cost (einsum sums the short last axis without a temporary)."""
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
 
 
 def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -78,15 +85,15 @@ def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """
     u = np.asarray(u, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
-    u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
-    v = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    u = u / np.maximum(norm(u), 1e-12)[..., None]
+    v = v / np.maximum(norm(v), 1e-12)[..., None]
     u, v = np.broadcast_arrays(u, v)
     w = 1.0 + np.sum(u * v, axis=-1, keepdims=True)
     axis = np.cross(u, v)
     # for opposite vectors pick any axis perpendicular to u
     alt = np.cross(u, np.array([1.0, 0.0, 0.0]))
     alt2 = np.cross(u, np.array([0.0, 1.0, 0.0]))
-    alt = np.where(np.linalg.norm(alt, axis=-1, keepdims=True) < 1e-6, alt2, alt)
+    alt = np.where(norm(alt)[..., None] < 1e-6, alt2, alt)
     opposite = w < 1e-9
     axis = np.where(opposite, alt, axis)
     w = np.where(opposite, 0.0, w)
@@ -211,26 +218,45 @@ def from_matrix(m: np.ndarray) -> np.ndarray:
     method in numpy (each from its largest of w, x, y, z, so no division by a small number);
     a matrix that is not quite orthonormal gives the normalised nearest quaternion."""
     m = np.asarray(m, dtype=np.float64)
-    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
-    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
-    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    return _from_entries(*(m[..., i, j] for i in range(3) for j in range(3)))
+
+
+# Shepperd's four formulas: for each largest square (w, x, y, z), the terms 4 q_i q_k it
+# takes component i from, as rows of _TERMS (wx, wy, wz, xy, xz, yz, w2, x2, y2, z2)
+_SHEPPERD = np.array([[0, 1, 2, 6], [7, 3, 4, 0], [3, 8, 5, 1], [4, 5, 9, 2]])
+
+
+def _from_entries(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> np.ndarray:
+    """:func:`from_matrix` of the matrices whose entries are given as arrays ``(...)``:
+    the ten terms computed once, each quaternion gathered from them (one ``take``, not a
+    ``(..., 4, 4)`` table of candidates)."""
+    shape = np.shape(m00)
+    terms = np.empty((10,) + shape)
+    flat = terms.reshape(10, -1)
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = (
+        np.asarray(e, dtype=np.float64).reshape(-1)
+        for e in (m00, m01, m02, m10, m11, m12, m20, m21, m22)
+    )
+    np.subtract(m21, m12, out=flat[0])
+    np.subtract(m02, m20, out=flat[1])
+    np.subtract(m10, m01, out=flat[2])
+    np.add(m01, m10, out=flat[3])
+    np.add(m02, m20, out=flat[4])
+    np.add(m12, m21, out=flat[5])
     # 4 w^2, 4 x^2, 4 y^2, 4 z^2 (times the same scale); the largest picks the formula
-    squares = np.stack(
-        [1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22],
-        axis=-1,
+    plus, minus = 1 + m00, 1 - m00
+    np.add(plus + m11, m22, out=flat[6])
+    np.subtract(plus - m11, m22, out=flat[7])
+    np.subtract(minus + m11, m22, out=flat[8])
+    np.add(minus - m11, m22, out=flat[9])
+    w2, x2, y2, z2 = flat[6:]
+    # np.argmax over the four, first of equals, without its slow short-axis reduction
+    best = np.where(
+        np.maximum(y2, z2) > np.maximum(w2, x2), 2 + (z2 > y2), (x2 > w2).astype(np.intp)
     )
-    best = np.argmax(squares, axis=-1)
-    candidates = np.stack(
-        [
-            np.stack([m21 - m12, m02 - m20, m10 - m01, squares[..., 0]], axis=-1),
-            np.stack([squares[..., 1], m01 + m10, m02 + m20, m21 - m12], axis=-1),
-            np.stack([m01 + m10, squares[..., 2], m12 + m21, m02 - m20], axis=-1),
-            np.stack([m02 + m20, m12 + m21, squares[..., 3], m10 - m01], axis=-1),
-        ],
-        axis=-2,
-    )
-    q = np.take_along_axis(candidates, best[..., None, None], axis=-2)[..., 0, :]
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    count = len(best)
+    q = flat.take(_SHEPPERD[best] * count + np.arange(count)[:, None])
+    return (q / norm(q)[:, None]).reshape(shape + (4,))
 
 
 def to_6d(q: np.ndarray) -> np.ndarray:
@@ -243,11 +269,14 @@ def from_6d(r6: np.ndarray) -> np.ndarray:
     """Quaternions from 6D ``(..., 6)`` by Gram-Schmidt (inverse of :func:`to_6d`)."""
     r6 = np.asarray(r6, dtype=np.float64)
     a, b = r6[..., :3], r6[..., 3:]
-    x = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
-    b = b - np.sum(x * b, axis=-1, keepdims=True) * x
-    y = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
-    z = np.cross(x, y)
-    return from_matrix(np.stack([x, y, z], axis=-1))
+    x = a / np.maximum(norm(a), 1e-12)[..., None]
+    b = b - np.einsum("...i,...i->...", x, b)[..., None] * x
+    y = b / np.maximum(norm(b), 1e-12)[..., None]
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    y0, y1, y2 = y[..., 0], y[..., 1], y[..., 2]
+    z0, z1, z2 = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0  # x cross y
+    # the matrix has columns x, y, z
+    return _from_entries(x0, y0, z0, x1, y1, z1, x2, y2, z2)
 
 
 def to_rotvec(q: np.ndarray) -> np.ndarray:
@@ -268,17 +297,17 @@ def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """Spherical interpolation from ``a`` to ``b`` (``(..., 4)``) at ``t`` (broadcasting)."""
     a = normalize(a)
     b = normalize(b)
-    t = np.asarray(t, dtype=np.float64)[..., None]  # t broadcasts against a.shape[:-1]
-    d = np.sum(a * b, axis=-1, keepdims=True)
-    b = np.where(d < 0, -b, b)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    t = np.asarray(t, dtype=np.float64)  # broadcasts against a.shape[:-1]
+    d = np.einsum("...i,...i->...", a, b)
+    # per rotation, not per component: b's sign (the nearer of b and -b) goes into its weight
+    sign = np.where(d < 0, -1.0, 1.0)
+    theta = np.arccos(np.minimum(np.abs(d), 1.0))
     s = np.sin(theta)
     small = s < 1e-6
     s = np.where(small, 1.0, s)
     wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / s)
-    wb = np.where(small, t, np.sin(t * theta) / s)
-    return normalize(wa * a + wb * b)
+    wb = np.where(small, t, np.sin(t * theta) / s) * sign
+    return normalize(wa[..., None] * a + wb[..., None] * b)
 
 
 def yaw(q: np.ndarray) -> np.ndarray:
