@@ -133,8 +133,10 @@ def canonical_foot_contacts(motion: Motion, **thresholds) -> np.ndarray:
     """Contacts ``(F, 4)`` of Foot_L, Toes_L, Foot_R, Toes_R for a canonical-skeleton motion."""
     if motion.skeleton.names != C.JOINTS:
         raise MotionError("expected a motion on the canonical skeleton", kind="unusable")
-    gpos = K.global_positions(motion)
     thresholds.setdefault("scale", C.leg_length())
+    # with a scale, only the feet's positions are read: the rest of the body is not posed
+    feet = CANONICAL_FOOT_JOINTS if thresholds["scale"] is not None else None
+    gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=feet)[1]
     return foot_contacts(gpos, motion.fps, CANONICAL_FOOT_JOINTS, **thresholds)
 
 

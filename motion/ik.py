@@ -15,6 +15,7 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from motion import canonical as C
 from motion import contacts as CT
+from motion import kinematics as K
 from motion import rotations as rot
 from motion.errors import MotionError
 from motion.skeleton import Motion
@@ -155,29 +156,6 @@ def two_bone_ik(
 
 
 # --------------------------------------------------------------------------- feet
-
-
-def _fk_of(
-    lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray, joints: list[int]
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`kinematics.fk` ``(F, J, 4)``, ``(F, J, 3)`` for ``joints`` and their ancestors
-    only (the others left zero): the foot clean-up needs the legs, not the arms and head,
-    and full FK had been most of its time."""
-    needed: set[int] = set()
-    for j in joints:
-        while j >= 0 and j not in needed:
-            needed.add(j)
-            j = int(parents[j])
-    grot = np.zeros(lrot.shape)
-    gpos = np.zeros(lpos.shape)
-    for j in sorted(needed):
-        p = int(parents[j])
-        if p < 0:
-            grot[:, j], gpos[:, j] = lrot[:, j], lpos[:, j]
-        else:
-            gpos[:, j] = rot.apply(grot[:, p], lpos[:, j]) + gpos[:, p]
-            grot[:, j] = rot.mul(grot[:, p], lrot[:, j])
-    return grot, gpos
 
 
 def _leg_joints(legs: list[tuple[int, int, int, int | None]]) -> list[int]:
@@ -381,7 +359,7 @@ def pin_feet(
             raise MotionError(f"toe contacts must be {contacts.shape}, got {toe_contacts.shape}")
     blend = int(round(BLEND_SECONDS * motion.fps)) if blend_frames is None else int(blend_frames)
     parents = motion.skeleton.parents
-    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(legs))
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
     lrot = motion.lrot.copy()
     if hold_flat_feet and toe_contacts is not None:
         for i, (_, _, ankle, _) in enumerate(legs):
@@ -390,7 +368,7 @@ def pin_feet(
                 held = _held_rotations(grot[:, ankle], flat, blend)
                 local = rot.mul(rot.inv(grot[:, int(parents[ankle])]), held)
                 lrot[:, ankle] = np.where(_dot(local, lrot[:, ankle]) < 0, -local, local)
-        grot, gpos = _fk_of(lrot, motion.lpos, parents, _leg_joints(legs))
+        grot, gpos = K.fk(lrot, motion.lpos, parents, joints=_leg_joints(legs))
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
@@ -484,7 +462,7 @@ def pin_canonical_feet(
                 f"the floor's motion has {floor_of.num_frames} frames, not {motion.num_frames}"
             )
         feet = CT.CANONICAL_FOOT_JOINTS
-        gpos = _fk_of(floor_of.lrot, floor_of.lpos, floor_of.skeleton.parents, list(feet))[1]
+        gpos = K.fk(floor_of.lrot, floor_of.lpos, floor_of.skeleton.parents, joints=list(feet))[1]
         found = CT.ground_heights(gpos, feet, C.leg_length())
         levels = dict(zip(feet, found.tolist(), strict=True))
         motion = ground_hips(motion, contacts, levels, C.INDEX["Hips"])
@@ -526,7 +504,7 @@ def lift_swing_feet(
     if contacts.shape != (motion.num_frames, 4) or clearance.shape != (motion.num_frames, 2):
         raise MotionError(f"contacts (F, 4) and clearance (F, 2) for {motion.num_frames} frames")
     parents = motion.skeleton.parents
-    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(CANONICAL_LEGS))
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(CANONICAL_LEGS))
     lrot = motion.lrot.copy()
     sigma = sigma_seconds * motion.fps
     for i, leg in enumerate(CANONICAL_LEGS):
@@ -566,7 +544,7 @@ def lift_toes(
             f"toe contacts must be ({motion.num_frames}, {len(legs)}), got {toe_contacts.shape}"
         )
     parents = motion.skeleton.parents
-    grot, gpos = _fk_of(motion.lrot, motion.lpos, parents, _leg_joints(legs))
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
     lrot = motion.lrot.copy()
     up = np.array([0.0, 1.0, 0.0])
     for i, (_, _, ankle, toe) in enumerate(legs):
@@ -623,7 +601,7 @@ def ground_hips(
     held = contacts.any(axis=1)
     if not held.any():
         return motion
-    gpos = _fk_of(motion.lrot, motion.lpos, motion.skeleton.parents, feet)[1]
+    gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=feet)[1]
     gap = np.array([levels[j] for j in feet])[None] - gpos[:, feet, 1]
     frames = np.arange(motion.num_frames)
     lowest = np.where(contacts, gap, -np.inf).max(axis=1)

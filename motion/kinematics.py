@@ -30,27 +30,44 @@ def levels(parents: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def fk(lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def fk(
+    lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray, joints: list[int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Global rotations ``(..., J, 4)`` and positions ``(..., J, 3)`` from local ones.
 
     ``lrot (..., J, 4)``, ``lpos (..., J, 3)``: a joint's rotation and its translation
     from its parent (the root's is its world position); ``parents (J,)`` parents first.
-    Loops over the hierarchy's levels (all joints of one depth at once), never frames.
+    Loops over joints, never frames. With ``joints``, only those and their ancestors are
+    posed, the others left zero (the foot clean-up needs the legs, not the arms and head).
     """
     lrot = np.asarray(lrot, dtype=np.float64)
     lpos = np.asarray(lpos, dtype=np.float64)
     shape = np.broadcast_shapes(lrot.shape[:-1], lpos.shape[:-1])
-    lrot = np.broadcast_to(lrot, shape + (4,))
-    lpos = np.broadcast_to(lpos, shape + (3,))
-    grot = np.empty(shape + (4,))
-    gpos = np.empty(shape + (3,))
-    grot[..., 0, :] = lrot[..., 0, :]
-    gpos[..., 0, :] = lpos[..., 0, :]
-    for joints, above in levels(parents):
-        prot = grot[..., above, :]
-        gpos[..., joints, :] = rot.apply(prot, lpos[..., joints, :]) + gpos[..., above, :]
-        grot[..., joints, :] = rot.mul(prot, lrot[..., joints, :])
-    return grot, gpos
+    # joint-major, one joint at a time: each step reads whole blocks, where posing a level
+    # at once (frames first) had gathered strided picks out of every frame, 2-3x the time
+    # on long clips and no faster on short ones
+    lrot = np.moveaxis(np.broadcast_to(lrot, shape + (4,)), -2, 0)
+    lpos = np.moveaxis(np.broadcast_to(lpos, shape + (3,)), -2, 0)
+    posed = _with_ancestors(parents, range(len(lrot)) if joints is None else joints)
+    empty = np.empty if joints is None else np.zeros
+    grot, gpos = empty(lrot.shape), empty(lpos.shape)
+    grot[0], gpos[0] = lrot[0], lpos[0]
+    for j in range(1, len(lrot)):
+        if posed[j]:
+            p = parents[j]
+            gpos[j] = rot.apply(grot[p], lpos[j]) + gpos[p]
+            grot[j] = rot.mul(grot[p], lrot[j])
+    return np.moveaxis(grot, 0, -2), np.moveaxis(gpos, 0, -2)
+
+
+def _with_ancestors(parents: np.ndarray, joints) -> np.ndarray:
+    """``(J,)`` bool: ``joints`` and every joint above them."""
+    out = np.zeros(len(parents), dtype=bool)
+    for j in joints:
+        while j >= 0 and not out[j]:
+            out[j] = True
+            j = int(parents[j])
+    return out
 
 
 def global_positions(motion: Motion) -> np.ndarray:
