@@ -37,7 +37,7 @@ SWING_CLEARANCE = 0.05
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = rot.norm(v)[..., None]
     out = v / np.maximum(n, 1e-12)
     if fallback is not None:
         out = np.where(n > 1e-12, out, fallback)
@@ -45,7 +45,7 @@ def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1, keepdims=True)
+    return np.einsum("...i,...i->...", a, b)[..., None]  # np.sum over a short axis is slow
 
 
 def _perpendicular(v: np.ndarray, hint: np.ndarray | None = None) -> np.ndarray:
@@ -55,9 +55,7 @@ def _perpendicular(v: np.ndarray, hint: np.ndarray | None = None) -> np.ndarray:
     out = _unit(seed - _dot(seed, v) * v)
     if hint is not None:
         projected = hint - _dot(hint, v) * v
-        big = np.linalg.norm(projected, axis=-1, keepdims=True) > 1e-9 * np.maximum(
-            np.linalg.norm(hint, axis=-1, keepdims=True), 1e-300
-        )
+        big = rot.norm(projected)[..., None] > 1e-9 * np.maximum(rot.norm(hint)[..., None], 1e-300)
         out = np.where(big, _unit(projected), out)
     return out
 
@@ -113,11 +111,11 @@ def two_bone_ik(
     )
     thigh = knee - hip
     shin = ankle - knee
-    thigh_len = np.linalg.norm(thigh, axis=-1, keepdims=True)
-    shin_len = np.linalg.norm(shin, axis=-1, keepdims=True)
+    thigh_len = rot.norm(thigh)[..., None]
+    shin_len = rot.norm(shin)[..., None]
     full = thigh_len + shin_len
     reach_now = ankle - hip
-    dist_now = np.linalg.norm(reach_now, axis=-1, keepdims=True)
+    dist_now = rot.norm(reach_now)[..., None]
     line_old = _unit(reach_now, _unit(thigh, np.array([0.0, -1.0, 0.0])))
     to_target = target - hip
     line_new = _unit(to_target, line_old)
@@ -127,13 +125,13 @@ def two_bone_ik(
     longest = np.minimum(full, np.maximum((1.0 - eps) * full, dist_now))
     folded = np.abs(thigh_len - shin_len)
     shortest = np.maximum(folded, np.minimum(folded + eps * full, dist_now))
-    dist = np.clip(np.linalg.norm(to_target, axis=-1, keepdims=True), shortest, longest)
+    dist = np.clip(rot.norm(to_target)[..., None], shortest, longest)
 
     # bend direction: the knee's offset from the hip-ankle line, steered by the pole
     # only when the leg is straight
     bend_now = (thigh - _dot(thigh, line_old) * line_old) / np.maximum(thigh_len, 1e-12)
     hint = _perpendicular(line_old, None if pole is None else np.asarray(pole, dtype=np.float64))
-    straightness = np.maximum(POLE_WEIGHT - np.linalg.norm(bend_now, axis=-1, keepdims=True), 0.0)
+    straightness = np.maximum(POLE_WEIGHT - rot.norm(bend_now)[..., None], 0.0)
     bend_old = _unit(bend_now + straightness * hint, hint)
     bend_new = rot.apply(rot.between(line_old, line_new), bend_old)
     bend_new = _unit(bend_new - _dot(bend_new, line_new) * line_new, _perpendicular(line_new))
@@ -286,11 +284,11 @@ def _within_reach(hip, knee, ankle, target) -> np.ndarray:
     the last ``SOFT_REACH`` of it; the target then moves up (not sideways), so the foot
     lifts a little rather than slides. Targets no farther than the ankle is now stay.
     """
-    full = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
-    now = np.linalg.norm(ankle - hip, axis=-1)
+    full = rot.norm(knee - hip) + rot.norm(ankle - knee)
+    now = rot.norm(ankle - hip)
     longest = np.minimum(full, np.maximum((1.0 - REACH_EPS) * full, now))
     rel = target - hip
-    wanted = np.linalg.norm(rel, axis=-1)
+    wanted = rot.norm(rel)
     knee_soft = np.minimum(np.maximum(longest - SOFT_REACH * full, now), longest)
     room = np.maximum(longest - knee_soft, 1e-12)
     eased = knee_soft + room * -np.expm1(-np.maximum(wanted - knee_soft, 0.0) / room)
@@ -308,9 +306,7 @@ def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
     thigh's frame, or failing that (a leg never bent) the foot's direction."""
     bend = np.cross(knee - hip, ankle - knee)
     hinge_local = rot.apply(rot.inv(grot_hip), bend).sum(axis=0)
-    scale = (
-        np.linalg.norm(knee - hip, axis=-1).mean() * np.linalg.norm(ankle - knee, axis=-1).mean()
-    )
+    scale = rot.norm(knee - hip).mean() * rot.norm(ankle - knee).mean()
     if np.linalg.norm(hinge_local) > 1e-3 * scale * len(hip):
         hinge = rot.apply(grot_hip, hinge_local / np.linalg.norm(hinge_local))
     elif toe is not None:
@@ -564,7 +560,7 @@ def lift_toes(
         if not len(f):
             continue
         foot = gpos[f, toe] - gpos[f, ankle]
-        length = np.linalg.norm(foot, axis=-1)
+        length = rot.norm(foot)
         rise = np.clip(foot[:, 1] + lift[f], -0.999 * length, 0.999 * length)
         ahead = _unit(foot * [1.0, 0.0, 1.0], np.array([0.0, 0.0, 1.0]))
         lifted = ahead * np.sqrt(length**2 - rise**2)[:, None] + rise[:, None] * up
