@@ -15,9 +15,10 @@ takes). A name may be another name of a style (``extra.aliases``: old is elderly
 A transfer: restyle with the target code; at a ``strength`` below 1, each joint's rotation
 goes that part of the way from the content's own to the restyled one (0 gives the content
 back); the content's root trajectory
-(``features.decode_motion``); the hips raised or lowered so that the feet planted where the
-CONTENT's are stand on the content's floor, then held there, and the feet the content has
-in the air kept clear of the floor (``ik.pin_canonical_feet``);
+(``features.decode_motion``); the feet planted where the CONTENT's are held on the
+content's floor (the knees bend to reach it down to ``ik.KNEE_ABSORB`` of a leg, the hips
+move for the rest), and the feet the content has in the air kept clear of the floor
+(``ik.pin_canonical_feet``);
 then the time warp, to the power ``strength`` and clamped to [``MIN_WARP``, ``MAX_WARP``]:
 for a style clip the ratio of velocity factors (style over content, aberman2020); for a
 named style or mix the style's speed against the other styles on the same action

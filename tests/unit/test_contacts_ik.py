@@ -442,6 +442,46 @@ def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
         ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
 
 
+@pytest.mark.parametrize("by", [3.0, 12.0])  # cm raised by: less, more than the knees take
+def test_ground_hips_leaves_a_small_sink_to_the_knees(fixture_walk, by):
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    hips, absorb = C.INDEX["Hips"], 6.0
+    sunk = _hips_raised(fixture_walk, -by)
+    settled = ik.ground_hips(sunk, contacts, levels, hips)  # raised the whole way
+    kept = ik.ground_hips(sunk, contacts, levels, hips, absorb=absorb)
+    raised = kept.lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
+    whole = settled.lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
+    np.testing.assert_allclose(raised, np.maximum(whole - absorb, 0.0), atol=1e-9)
+    assert (raised.max() < 1e-9) if by < absorb - 2.5 else (raised.min() > by - absorb - 2.5)
+    floating = ik.ground_hips(_hips_raised(fixture_walk, by), contacts, levels, hips, absorb=absorb)
+    np.testing.assert_allclose(floating.lpos, settled.lpos, atol=1e-6)  # floating: lowered whole
+
+
+def test_sunk_feet_reach_the_contents_floor_with_bent_knees(fixture_walk):
+    """A restyled body a little lower than the content keeps its height: its planted feet
+    come up onto the content's floor by leg IK, the knees bending more."""
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    knee = C.INDEX["LowerLeg_L"]
+    low = _hips_raised(fixture_walk, -0.5 * ik.KNEE_ABSORB * C.leg_length())
+    out = ik.pin_canonical_feet(low, contacts, floor_of=fixture_walk)
+    np.testing.assert_allclose(out.lpos, low.lpos)  # the hips stay low
+    np.testing.assert_allclose(_foot_levels(out), _foot_levels(fixture_walk), atol=1.0)
+
+    def bend(m):  # the angle between the left thigh and shin, degrees, mean over frames
+        g = K.global_positions(m)
+        thigh = g[:, C.INDEX["UpperLeg_L"]] - g[:, knee]
+        shin = g[:, C.INDEX["Foot_L"]] - g[:, knee]
+        cos = (
+            np.sum(thigh * shin, -1)
+            / np.linalg.norm(thigh, axis=-1)
+            / np.linalg.norm(shin, axis=-1)
+        )
+        return 180.0 - np.degrees(np.arccos(np.clip(cos, -1, 1))).mean()
+
+    assert bend(out) > bend(fixture_walk) + 3.0
+
+
 def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
     """A floor 6 cm over the walk's toe level: every toe in the air within 6 cm of the real
     floor dips under it. The ankles turn the dipping toes up onto it; nothing else moves."""
