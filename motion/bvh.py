@@ -42,8 +42,8 @@ def loads(data: str | bytes) -> Motion:
     """Parse BVH text (``str`` or ``bytes``).
 
     The hierarchy is read line by line; the motion block is read as one array
-    (``np.fromstring`` over the whole block, its line structure checked on the bytes), so
-    the cost is that of numpy's number parsing, not of a Python loop over frames.
+    (``np.loadtxt``'s C reader, or the checked reader behind it), so the cost is that of
+    numpy's number parsing, not of a Python loop over frames.
     """
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     if raw.startswith(b"\xef\xbb\xbf"):
@@ -291,8 +291,40 @@ def _parse_motion(raw: bytes, pos: int, line: int, skeleton: Skeleton) -> tuple[
 def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     """The motion block ``block`` (bytes after the ``Frame Time`` line, whose first line is
     ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
-    ``channels`` finite numbers. One ``np.fromstring`` reads all the numbers; the count of
-    numbers on each line is checked on the bytes (a space followed by a non-space starts
+    ``channels`` finite numbers. A well-formed block is read by :func:`_read_clean_block`;
+    any other goes through :func:`_read_checked_block`, which names the problem."""
+    values = _read_clean_block(block, channels)
+    return _read_checked_block(block, channels, first_line) if values is None else values
+
+
+def _read_clean_block(block: bytes, channels: int) -> np.ndarray | None:
+    """``block`` read by ``np.loadtxt`` (a C reader, about three times faster than
+    :func:`_read_checked_block`), or None when that reader might disagree with the checked
+    one or the block has a problem: the checked reader then reads it or names the problem.
+    Only ASCII with no control bytes but tab, CR and LF is tried, so that both split the
+    numbers at the same bytes; both read each number as correctly rounded ``float()``."""
+    if channels == 0 or not block.isascii():
+        return None
+    data = np.frombuffer(block, dtype=np.uint8)
+    control = data[data < 32]
+    if not ((control == 9) | (control == 10) | (control == 13)).all():
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # an empty block warns
+            values = np.loadtxt(io.BytesIO(block), dtype=np.float64, comments=None, ndmin=2)
+    except (ValueError, UserWarning):
+        return None
+    if values.shape[1] != channels or not np.isfinite(values).all():
+        return None
+    if np.abs(values).max(initial=0.0) > MAX_ABS_VALUE:
+        return None
+    return values
+
+
+def _read_checked_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
+    """:func:`_read_block` with every check named. One ``np.fromstring`` reads all the
+    numbers; the count of numbers on each line is checked on the bytes (a space followed by a non-space starts
     one), so a line with a missing value and one with an extra value cannot cancel out.
     Plain decimals are read by :func:`_decimals`; anything it declines goes through
     ``np.fromstring``, whose failure is then traced to its line."""
