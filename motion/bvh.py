@@ -8,6 +8,8 @@ replace the joint's OFFSET (what Bandai, CMU and most tools mean).
 Writing keeps names, offsets, End Sites, channel layout and frame time, so
 ``loads(dumps(m))`` reproduces ``m`` to print precision. Malformed input
 raises :class:`~motion.errors.MotionError` naming the line and the problem.
+A little over 600 lines: the number reader and writer are the service's hottest text code,
+each with a fast path and the checked one it must agree with, kept side by side.
 """
 
 from __future__ import annotations
@@ -503,73 +505,102 @@ def dumps(motion: Motion) -> str:
 
     write_joint(0, 0)
     out.write(f"MOTION\nFrames: {motion.num_frames}\nFrame Time: {1.0 / motion.fps:.7f}\n")
-    out.write(_motion_block(motion))
-    return out.getvalue()
+    return out.getvalue() + _motion_block(motion)  # the block not copied through the buffer
 
 
 def _motion_block(motion: Motion) -> str:
+    """The frames as text: one ``to_euler`` per rotation order over all its joints, then the
+    channels picked from positions and angles as one array."""
     sk = motion.skeleton
-    cols = []
+    if not any(sk.channels):
+        return "\n" * motion.num_frames
+    by_order: dict[str, list[int]] = {}
+    for j, chans in enumerate(sk.channels):
+        if any(c in ROTATION_CHANNELS for c in chans):
+            by_order.setdefault(sk.rotation_order(j), []).append(j)
+    euler = np.zeros_like(motion.lpos)
+    for order, joints in by_order.items():
+        angles = rotations.to_euler(motion.lrot[:, joints], order)
+        euler[:, joints] = np.rad2deg(np.unwrap(np.deg2rad(angles), axis=0))  # no 360° jumps
+    table = np.concatenate((motion.lpos, euler), axis=1)  # (F, 2J, 3): positions, then angles
+    rows, axes = [], []
     for j, chans in enumerate(sk.channels):
         order = sk.rotation_order(j)
-        euler = None
-        if any(c in ROTATION_CHANNELS for c in chans):
-            euler = rotations.to_euler(motion.lrot[:, j], order)
-            euler = np.rad2deg(np.unwrap(np.deg2rad(euler), axis=0))  # no 360-degree jumps
         for c in chans:
-            if c in POSITION_CHANNELS:
-                cols.append(motion.lpos[:, j, "XYZ".index(c[0])])
-            else:
-                cols.append(euler[:, order.index(c[0])])
-    if not cols:
-        return "\n" * motion.num_frames
-    return format_fixed(np.stack(cols, axis=1))
+            position = c in POSITION_CHANNELS
+            rows.append(j if position else sk.num_joints + j)
+            axes.append("XYZ".index(c[0]) if position else order.index(c[0]))
+    return format_fixed(table[:, rows, axes])
 
 
-_DIGITS3 = np.array([list(f"{i:03d}".encode()) for i in range(1000)], dtype=np.uint8)
+def _digit_words(width: int) -> np.ndarray:
+    """ASCII of ``0..10**width - 1``, zero-padded, as little-endian words (byte i, digit i)."""
+    text = [f"{n:0{width}d}".encode() for n in range(10**width)]
+    return np.array([int.from_bytes(t, "little") for t in text], dtype="<u8")
+
+
+_DIGITS4, _DIGITS3 = _digit_words(4), _digit_words(3)
 _POW10 = 10 ** np.arange(19, dtype=np.int64)
 _FIXED_LIMIT = 1e12  # beyond this (never motion) the text goes through printf
+_CHUNK = 16_384  # numbers formatted at a time
+# _KEEP[lead][first]: the bytes written of a number laid out in lead + 1 words that starts
+# at byte first, as words
+_KEEP = {
+    lead: np.array([[0] * b + [1] * (8 * lead + 8 - b) for b in range(8 * lead)], "u1").view("<u8")
+    for lead in (1, 2)
+}
+
+
+def _divide(x: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """``x // d, x % d`` of non-negative integers (numpy's // by a constant is many times
+    faster than its % and divmod)."""
+    q = x // d
+    return q, x - q * d
 
 
 def format_fixed(values: np.ndarray) -> str:
     """Rows of ``values (F, C)`` as text, ``%.6f`` numbers separated by spaces, one row a
-    line. Built as one byte array (digits looked up three at a time, then the unused
-    leading cells dropped), not by formatting each number in Python: the same text as
-    ``np.savetxt(fmt="%.6f")`` but for ties at the seventh decimal and ``-0.000000``,
-    written ``0.000000``."""
+    line. Built as one byte array, not by formatting each number in Python: each number
+    is laid out as 8-byte words, its whole part right-aligned and zero-padded in the
+    leading words (digits looked up four at a time), then ``.dddddd`` and the separator,
+    and the unused leading bytes are dropped. The same text as ``np.savetxt(fmt="%.6f")``
+    but for ties at the seventh decimal and ``-0.000000``, written ``0.000000``."""
     values = np.asarray(values, dtype=np.float64)
     frames, channels = values.shape
     if not np.isfinite(values).all() or np.abs(values).max(initial=0.0) >= _FIXED_LIMIT:
         buf = io.StringIO()
         np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
         return buf.getvalue()
+    # a few thousand numbers at a time: the temporaries stay in cache and in memory already
+    # mapped (freeing a large one hands its pages back, and the next one faults them in)
+    step = max(1, _CHUNK // max(channels, 1))
+    return "".join(_format_rows(values[i : i + step]) for i in range(0, max(frames, 1), step))
+
+
+def _format_rows(values: np.ndarray) -> str:
+    """:func:`format_fixed` of finite ``values`` below ``_FIXED_LIMIT``, all at once."""
+    frames, channels = values.shape
     scaled = np.rint(values.ravel() * 1e6).astype(np.int64)
     negative = scaled < 0
-    magnitude = np.abs(scaled)
-    whole = magnitude // 1_000_000
-    fraction = magnitude - whole * 1_000_000
-    groups = max(1, -(-len(str(int(whole.max(initial=0)))) // 3))
-    width = 1 + 3 * groups + 1 + 6 + 1  # sign, whole part, point, fraction, separator
-    cells = np.empty((len(scaled), width), dtype=np.uint8)
-    cells[:, 0] = ord("-")
-    rest = whole
-    for g in range(groups):  # three digits of the whole part at a time, units first
-        group = rest % 1000
-        rest = rest // 1000
-        stop = 1 + 3 * (groups - g)
-        cells[:, stop - 3 : stop] = np.take(_DIGITS3, group, axis=0)
-    cells[:, 1 + 3 * groups] = ord(".")
-    high = fraction // 1000
-    cells[:, 2 + 3 * groups : 5 + 3 * groups] = np.take(_DIGITS3, high, axis=0)
-    cells[:, 5 + 3 * groups : 8 + 3 * groups] = np.take(_DIGITS3, fraction - high * 1000, axis=0)
+    whole, fraction = _divide(np.abs(scaled), 1_000_000)
+    lead = 1 + len(str(int(whole.max(initial=0)))) // 8  # words for the digits and a sign
+    words = np.empty((len(scaled), lead + 1), dtype="<u8")
+    eights = [whole] if lead == 1 else _divide(whole, 100_000_000)  # eight digits a word
+    for w, eight in enumerate(eights):
+        high, low = _divide(eight, 10_000)
+        words[:, w] = _DIGITS4[high] | (_DIGITS4[low] << np.uint64(32))
+    high, low = _divide(fraction, 1000)
+    words[:, lead] = (_DIGITS3[high] << np.uint64(8)) | (_DIGITS3[low] << np.uint64(32))
+    cells = words.view(np.uint8)  # (N, 8 * lead + 8)
+    point = 8 * lead
+    cells[:, point] = ord(".")
     cells[:, -1] = ord(" ")
-    cells.reshape(frames, channels, width)[:, -1, -1] = ord("\n")
-    keep = np.ones(cells.shape, dtype=bool)
-    keep[:, 0] = negative
-    # a whole-part digit is written where the number reaches its place (units always)
-    places = _POW10[3 * groups - 1 :: -1].copy()
-    places[-1] = 0
-    keep[:, 1 : 1 + 3 * groups] = whole[:, None] >= places
+    cells.reshape(frames, channels, point + 8)[:, -1, -1] = ord("\n")
+    digits = np.searchsorted(_POW10[1:], whole, side="right") + 1
+    first = point - digits - negative  # the sign's byte, or the first digit's
+    signed = np.flatnonzero(negative)
+    cells[signed, first[signed]] = ord("-")
+    keep = _KEEP[lead].take(first, axis=0).view(bool)
     return cells[keep].tobytes().decode("ascii")
 
 

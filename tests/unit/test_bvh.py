@@ -239,7 +239,7 @@ def test_fixed_point_writer_matches_printf():
     rng = np.random.default_rng(3)
     scale = rng.choice([1e-7, 1e-3, 1.0, 50.0, 1e4, 9e7], (200, 31))
     values = rng.standard_normal((200, 31)) * scale
-    values[0, :6] = [0.0, -4e-7, 123456.5, 1000.0, 999.9999999, -100.0]
+    values[0, :8] = [0.0, -4e-7, 123456.5, 1000.0, 999.9999999, -100.0, -98765432109.25, 1e8]
     buf = io.StringIO()
     np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
     want, got = buf.getvalue(), bvh.format_fixed(values)
