@@ -247,20 +247,35 @@ def _pin_offsets(
 
 def _held_rotations(grot: np.ndarray, flat: np.ndarray, blend: int) -> np.ndarray:
     """Global foot rotations ``(F, 4)`` held at each flat contact's average (``flat (F,)``:
-    heel and toe both down), eased in and out over ``blend`` frames around it."""
+    heel and toe both down), eased in and out over ``blend`` frames around it.
+
+    Every contact at once: the ramps fall with the distance to a contact, so each frame
+    outside one follows the nearer of the contacts before and after it (the earlier on a
+    tie), as if each contact had been laid over the frames in turn."""
     frames = len(grot)
-    target = grot.copy()
-    weight = np.zeros(frames)
-    t = np.arange(frames, dtype=np.float64)
-    for start, stop in _runs(flat):
-        run = grot[start:stop]
-        run = np.where(np.sum(run * run[:1], axis=-1, keepdims=True) < 0, -run, run)
-        held = rot.normalize(run.sum(axis=0))
-        w = np.ones(frames)
-        w[:start] = _smoothstep(1.0 - (start - t[:start]) / (blend + 1))
-        w[stop:] = _smoothstep(1.0 - (t[stop:] - stop + 1) / (blend + 1))
-        take = w > weight
-        target[take], weight[take] = held, w[take]
+    target, weight = grot.copy(), np.zeros(frames)
+    runs = _runs(flat)
+    if runs:
+        starts, stops = (np.array(edge) for edge in zip(*runs, strict=True))
+        inside = np.flatnonzero(flat)
+        run_of = np.searchsorted(starts, inside, side="right") - 1
+        run = grot[inside]
+        first = grot[starts][run_of]
+        run = np.where(np.sum(run * first, axis=-1, keepdims=True) < 0, -run, run)
+        total = np.zeros((len(runs), 4))
+        np.add.at(total, run_of, run)  # frame by frame, as run.sum(axis=0) adds them
+        held = rot.normalize(total)
+        t = np.arange(frames, dtype=np.float64)
+        before = np.searchsorted(stops, t, side="right") - 1  # the contact that ended last
+        after = np.searchsorted(starts, t, side="right")  # the next one to start
+        w_before = _smoothstep(1.0 - (t - stops[np.maximum(before, 0)] + 1) / (blend + 1))
+        w_after = _smoothstep(1.0 - (starts[np.minimum(after, len(runs) - 1)] - t) / (blend + 1))
+        w_before[before < 0], w_after[after == len(runs)] = 0.0, 0.0
+        which = np.where(w_after > w_before, after, before)
+        weight = np.maximum(w_before, w_after)
+        which[inside], weight[inside] = run_of, 1.0
+        eased = weight > 0
+        target[eased] = held[which[eased]]
     return rot.slerp(grot, target, weight)
 
 
