@@ -67,7 +67,7 @@ def _frame_rotation(u0: np.ndarray, n0: np.ndarray, u1: np.ndarray, n1: np.ndarr
     def frame(u, n):
         x = _unit(u)
         y = _unit(n - _dot(n, x) * x, _perpendicular(x))
-        return np.stack([x, y, np.cross(x, y)], axis=-1)  # columns
+        return np.stack([x, y, rot.cross(x, y)], axis=-1)  # columns
 
     m = frame(u1, n1) @ np.swapaxes(frame(u0, n0), -1, -2)
     return rot.from_matrix(m)
@@ -145,7 +145,7 @@ def two_bone_ik(
     # the thigh keeps its twist relative to the bend plane, so the knee still bends
     # about its own hinge
     hip_turn = _frame_rotation(
-        thigh, np.cross(line_old, bend_old), thigh_new, np.cross(line_new, bend_new)
+        thigh, rot.cross(line_old, bend_old), thigh_new, rot.cross(line_new, bend_new)
     )
     knee_turn = rot.between(rot.apply(hip_turn, shin), shin_new)
     knee_new = hip + rot.apply(hip_turn, thigh)
@@ -319,7 +319,7 @@ def _within_reach(hip, knee, ankle, target) -> np.ndarray:
 def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
     """Forward direction of each knee ``(F, 3)``: the clip's average hinge axis in the
     thigh's frame, or failing that (a leg never bent) the foot's direction."""
-    bend = np.cross(knee - hip, ankle - knee)
+    bend = rot.cross(knee - hip, ankle - knee)
     hinge_local = rot.apply(rot.inv(grot_hip), bend).sum(axis=0)
     scale = rot.norm(knee - hip).mean() * rot.norm(ankle - knee).mean()
     if np.linalg.norm(hinge_local) > 1e-3 * scale * len(hip):
@@ -327,10 +327,10 @@ def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
     elif toe is not None:
         forward = toe - ankle
         forward[:, 1] = 0.0
-        hinge = np.cross(forward, ankle - hip)
+        hinge = rot.cross(forward, ankle - hip)
     else:
         return np.zeros_like(hip)
-    return np.cross(ankle - hip, hinge)
+    return rot.cross(ankle - hip, hinge)
 
 
 def pin_feet(
@@ -373,13 +373,15 @@ def pin_feet(
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
     lrot = motion.lrot.copy()
     if hold_flat_feet and toe_contacts is not None:
-        for i, (_, _, ankle, _) in enumerate(legs):
+        for i, (_, _, ankle, toe) in enumerate(legs):
             flat = contacts[:, i] & toe_contacts[:, i]
             if flat.any():
                 held = _held_rotations(grot[:, ankle], flat, blend)
                 local = rot.mul(rot.inv(grot[:, int(parents[ankle])]), held)
                 lrot[:, ankle] = np.where(_dot(local, lrot[:, ankle]) < 0, -local, local)
-        grot, gpos = K.fk(lrot, motion.lpos, parents, joints=_leg_joints(legs))
+                # only the foot moved: pose it again, not the whole leg
+                foot = [ankle] if toe is None else _chain(parents, ankle, toe) + [toe]
+                K.repose(grot, gpos, lrot, motion.lpos, parents, foot)
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
@@ -447,7 +449,11 @@ CANONICAL_LEGS = [
 
 
 def pin_canonical_feet(
-    motion: Motion, contacts: np.ndarray | None = None, floor_of: Motion | None = None, **options
+    motion: Motion,
+    contacts: np.ndarray | None = None,
+    floor_of: Motion | None = None,
+    floor_positions: np.ndarray | None = None,
+    **options,
 ) -> Motion:
     """:func:`pin_feet` for a canonical motion; ``contacts (F, 4)`` as
     :func:`contacts.canonical_foot_contacts` gives them (Foot_L, Toes_L, Foot_R, Toes_R),
@@ -459,7 +465,8 @@ def pin_canonical_feet(
     With ``floor_of`` (a canonical motion as long, the content a network restyled) the
     hips first move so that the planted feet stand on that motion's floor
     (:func:`ground_hips`), and after the pinning a toe that dips under that floor where
-    ``contacts`` have it in the air is lifted onto it (:func:`lift_toes`)."""
+    ``contacts`` have it in the air is lifted onto it (:func:`lift_toes`);
+    ``floor_positions``, when given, is ``contacts.canonical_foot_positions(floor_of)``."""
     options.setdefault("hold_flat_feet", True)
     for m in (motion, floor_of):
         if m is not None and m.skeleton.names != C.JOINTS:
@@ -473,7 +480,7 @@ def pin_canonical_feet(
                 f"the floor's motion has {floor_of.num_frames} frames, not {motion.num_frames}"
             )
         feet = CT.CANONICAL_FOOT_JOINTS
-        gpos = K.fk(floor_of.lrot, floor_of.lpos, floor_of.skeleton.parents, joints=list(feet))[1]
+        gpos = CT.canonical_foot_positions(floor_of) if floor_positions is None else floor_positions
         found = CT.ground_heights(gpos, feet, C.leg_length())
         levels = dict(zip(feet, found.tolist(), strict=True))
         motion = ground_hips(motion, contacts, levels, C.INDEX["Hips"])
