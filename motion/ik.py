@@ -4,6 +4,9 @@ positions is :mod:`motion.fit`).
 Quaternions are (x, y, z, w) as in :mod:`motion.rotations`; positions ``(F, J, 3)``,
 Y up. Everything is vectorised over frames and loops over joints, legs or contact
 segments only. Functions return new arrays and motions and leave their inputs alone.
+A little over 600 lines: the leg IK and the clean-up passes built on it (pinning, the
+flat-foot hold, hips grounding, swing and toe lifts) share private helpers and run
+together on every request.
 """
 
 from __future__ import annotations
