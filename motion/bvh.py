@@ -8,6 +8,8 @@ replace the joint's OFFSET (what Bandai, CMU and most tools mean).
 Writing keeps names, offsets, End Sites, channel layout and frame time, so
 ``loads(dumps(m))`` reproduces ``m`` to print precision. Malformed input
 raises :class:`~motion.errors.MotionError` naming the line and the problem.
+A little over 600 lines: the number reader and writer are the service's hottest text code,
+each with a fast path and the checked one it must agree with, kept side by side.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ _FRAME_TIME_RE = re.compile(r"^frame\s+time\s*:?\s*(\S+)$", re.IGNORECASE)
 MAX_ABS_VALUE = 1e9  # offsets and channel values beyond this are damage, not motion
 _MIN_FRAME_TIME = 1e-4  # 10,000 fps: no capture system records faster
 _MAX_DEPTH = 256  # real rigs nest < 100 deep; deeper would overflow recursive writers
+_CHUNK = 16_384  # numbers converted or formatted at a time (see _frames_at_a_time)
 
 
 def load(path: str | os.PathLike) -> Motion:
@@ -42,8 +45,8 @@ def loads(data: str | bytes) -> Motion:
     """Parse BVH text (``str`` or ``bytes``).
 
     The hierarchy is read line by line; the motion block is read as one array
-    (``np.fromstring`` over the whole block, its line structure checked on the bytes), so
-    the cost is that of numpy's number parsing, not of a Python loop over frames.
+    (``np.loadtxt``'s C reader, or the checked reader behind it), so the cost is that of
+    numpy's number parsing, not of a Python loop over frames.
     """
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     if raw.startswith(b"\xef\xbb\xbf"):
@@ -291,8 +294,40 @@ def _parse_motion(raw: bytes, pos: int, line: int, skeleton: Skeleton) -> tuple[
 def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     """The motion block ``block`` (bytes after the ``Frame Time`` line, whose first line is
     ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
-    ``channels`` finite numbers. One ``np.fromstring`` reads all the numbers; the count of
-    numbers on each line is checked on the bytes (a space followed by a non-space starts
+    ``channels`` finite numbers. A well-formed block is read by :func:`_read_clean_block`;
+    any other goes through :func:`_read_checked_block`, which names the problem."""
+    values = _read_clean_block(block, channels)
+    return _read_checked_block(block, channels, first_line) if values is None else values
+
+
+def _read_clean_block(block: bytes, channels: int) -> np.ndarray | None:
+    """``block`` read by ``np.loadtxt`` (a C reader, about three times faster than
+    :func:`_read_checked_block`), or None when that reader might disagree with the checked
+    one or the block has a problem: the checked reader then reads it or names the problem.
+    Only ASCII with no control bytes but tab, CR and LF is tried, so that both split the
+    numbers at the same bytes; both read each number as correctly rounded ``float()``."""
+    if channels == 0 or not block.isascii():
+        return None
+    data = np.frombuffer(block, dtype=np.uint8)
+    control = data[data < 32]
+    if not ((control == 9) | (control == 10) | (control == 13)).all():
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # an empty block warns
+            values = np.loadtxt(io.BytesIO(block), dtype=np.float64, comments=None, ndmin=2)
+    except (ValueError, UserWarning):
+        return None
+    if values.shape[1] != channels or not np.isfinite(values).all():
+        return None
+    if np.abs(values).max(initial=0.0) > MAX_ABS_VALUE:
+        return None
+    return values
+
+
+def _read_checked_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
+    """:func:`_read_block` with every check named. One ``np.fromstring`` reads all the
+    numbers; the count of numbers on each line is checked on the bytes (a space followed by a non-space starts
     one), so a line with a missing value and one with an extra value cannot cancel out.
     Plain decimals are read by :func:`_decimals`; anything it declines goes through
     ``np.fromstring``, whose failure is then traced to its line."""
@@ -440,9 +475,20 @@ def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
     orders: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
         orders.setdefault(skeleton.rotation_order(j), []).append(j)
+    step = _frames_at_a_time(skeleton.num_joints)
     for order, joints in orders.items():
-        lrot[:, joints] = rotations.from_euler(euler[:, joints], order)
+        for start in range(0, frames, step):  # see _frames_at_a_time
+            part = slice(start, start + step)
+            lrot[part, joints] = rotations.from_euler(euler[part, joints], order)
     return Motion(skeleton, fps, lrot, lpos)
+
+
+def _frames_at_a_time(joints: int) -> int:
+    """Frames of ``joints`` joints converted at a time: a few thousand rotations, so the
+    temporaries stay in cache and in memory already mapped (freeing a large one hands
+    its pages back, and the next one faults them in again): from_euler of 3,840 frames
+    of 22 joints in 6.6 ms instead of 12.7."""
+    return max(1, _CHUNK // (4 * max(joints, 1)))
 
 
 def _fmt(v: np.ndarray | list[float]) -> str:
@@ -471,73 +517,99 @@ def dumps(motion: Motion) -> str:
 
     write_joint(0, 0)
     out.write(f"MOTION\nFrames: {motion.num_frames}\nFrame Time: {1.0 / motion.fps:.7f}\n")
-    out.write(_motion_block(motion))
-    return out.getvalue()
+    return out.getvalue() + _motion_block(motion)  # the block not copied through the buffer
 
 
 def _motion_block(motion: Motion) -> str:
+    """The frames as text: one ``to_euler`` per rotation order over all its joints, then the
+    channels picked from positions and angles as one array."""
     sk = motion.skeleton
-    cols = []
+    if not any(sk.channels):
+        return "\n" * motion.num_frames
+    by_order: dict[str, list[int]] = {}
+    for j, chans in enumerate(sk.channels):
+        if any(c in ROTATION_CHANNELS for c in chans):
+            by_order.setdefault(sk.rotation_order(j), []).append(j)
+    euler = np.zeros_like(motion.lpos)
+    for order, joints in by_order.items():
+        angles = rotations.to_euler(motion.lrot[:, joints], order)
+        euler[:, joints] = np.rad2deg(np.unwrap(np.deg2rad(angles), axis=0))  # no 360° jumps
+    table = np.concatenate((motion.lpos, euler), axis=1)  # (F, 2J, 3): positions, then angles
+    rows, axes = [], []
     for j, chans in enumerate(sk.channels):
         order = sk.rotation_order(j)
-        euler = None
-        if any(c in ROTATION_CHANNELS for c in chans):
-            euler = rotations.to_euler(motion.lrot[:, j], order)
-            euler = np.rad2deg(np.unwrap(np.deg2rad(euler), axis=0))  # no 360-degree jumps
         for c in chans:
-            if c in POSITION_CHANNELS:
-                cols.append(motion.lpos[:, j, "XYZ".index(c[0])])
-            else:
-                cols.append(euler[:, order.index(c[0])])
-    if not cols:
-        return "\n" * motion.num_frames
-    return format_fixed(np.stack(cols, axis=1))
+            position = c in POSITION_CHANNELS
+            rows.append(j if position else sk.num_joints + j)
+            axes.append("XYZ".index(c[0]) if position else order.index(c[0]))
+    return format_fixed(table[:, rows, axes])
 
 
-_DIGITS3 = np.array([list(f"{i:03d}".encode()) for i in range(1000)], dtype=np.uint8)
+def _digit_words(width: int) -> np.ndarray:
+    """ASCII of ``0..10**width - 1``, zero-padded, as little-endian words (byte i, digit i)."""
+    text = [f"{n:0{width}d}".encode() for n in range(10**width)]
+    return np.array([int.from_bytes(t, "little") for t in text], dtype="<u8")
+
+
+_DIGITS4, _DIGITS3 = _digit_words(4), _digit_words(3)
 _POW10 = 10 ** np.arange(19, dtype=np.int64)
 _FIXED_LIMIT = 1e12  # beyond this (never motion) the text goes through printf
+# _KEEP[lead][first]: the bytes written of a number laid out in lead + 1 words that starts
+# at byte first, as words
+_KEEP = {
+    lead: np.array([[0] * b + [1] * (8 * lead + 8 - b) for b in range(8 * lead)], "u1").view("<u8")
+    for lead in (1, 2)
+}
+
+
+def _divide(x: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """``x // d, x % d`` of non-negative integers (numpy's // by a constant is many times
+    faster than its % and divmod)."""
+    q = x // d
+    return q, x - q * d
 
 
 def format_fixed(values: np.ndarray) -> str:
     """Rows of ``values (F, C)`` as text, ``%.6f`` numbers separated by spaces, one row a
-    line. Built as one byte array (digits looked up three at a time, then the unused
-    leading cells dropped), not by formatting each number in Python: the same text as
-    ``np.savetxt(fmt="%.6f")`` but for ties at the seventh decimal and ``-0.000000``,
-    written ``0.000000``."""
+    line. Built as one byte array, not by formatting each number in Python: each number
+    is laid out as 8-byte words, its whole part right-aligned and zero-padded in the
+    leading words (digits looked up four at a time), then ``.dddddd`` and the separator,
+    and the unused leading bytes are dropped. The same text as ``np.savetxt(fmt="%.6f")``
+    but for ties at the seventh decimal and ``-0.000000``, written ``0.000000``."""
     values = np.asarray(values, dtype=np.float64)
     frames, channels = values.shape
     if not np.isfinite(values).all() or np.abs(values).max(initial=0.0) >= _FIXED_LIMIT:
         buf = io.StringIO()
         np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
         return buf.getvalue()
+    step = max(1, _CHUNK // max(channels, 1))  # rows at a time, as _frames_at_a_time
+    return "".join(_format_rows(values[i : i + step]) for i in range(0, max(frames, 1), step))
+
+
+def _format_rows(values: np.ndarray) -> str:
+    """:func:`format_fixed` of finite ``values`` below ``_FIXED_LIMIT``, all at once."""
+    frames, channels = values.shape
     scaled = np.rint(values.ravel() * 1e6).astype(np.int64)
     negative = scaled < 0
-    magnitude = np.abs(scaled)
-    whole = magnitude // 1_000_000
-    fraction = magnitude - whole * 1_000_000
-    groups = max(1, -(-len(str(int(whole.max(initial=0)))) // 3))
-    width = 1 + 3 * groups + 1 + 6 + 1  # sign, whole part, point, fraction, separator
-    cells = np.empty((len(scaled), width), dtype=np.uint8)
-    cells[:, 0] = ord("-")
-    rest = whole
-    for g in range(groups):  # three digits of the whole part at a time, units first
-        group = rest % 1000
-        rest = rest // 1000
-        stop = 1 + 3 * (groups - g)
-        cells[:, stop - 3 : stop] = np.take(_DIGITS3, group, axis=0)
-    cells[:, 1 + 3 * groups] = ord(".")
-    high = fraction // 1000
-    cells[:, 2 + 3 * groups : 5 + 3 * groups] = np.take(_DIGITS3, high, axis=0)
-    cells[:, 5 + 3 * groups : 8 + 3 * groups] = np.take(_DIGITS3, fraction - high * 1000, axis=0)
+    whole, fraction = _divide(np.abs(scaled), 1_000_000)
+    lead = 1 + len(str(int(whole.max(initial=0)))) // 8  # words for the digits and a sign
+    words = np.empty((len(scaled), lead + 1), dtype="<u8")
+    eights = [whole] if lead == 1 else _divide(whole, 100_000_000)  # eight digits a word
+    for w, eight in enumerate(eights):
+        high, low = _divide(eight, 10_000)
+        words[:, w] = _DIGITS4[high] | (_DIGITS4[low] << np.uint64(32))
+    high, low = _divide(fraction, 1000)
+    words[:, lead] = (_DIGITS3[high] << np.uint64(8)) | (_DIGITS3[low] << np.uint64(32))
+    cells = words.view(np.uint8)  # (N, 8 * lead + 8)
+    point = 8 * lead
+    cells[:, point] = ord(".")
     cells[:, -1] = ord(" ")
-    cells.reshape(frames, channels, width)[:, -1, -1] = ord("\n")
-    keep = np.ones(cells.shape, dtype=bool)
-    keep[:, 0] = negative
-    # a whole-part digit is written where the number reaches its place (units always)
-    places = _POW10[3 * groups - 1 :: -1].copy()
-    places[-1] = 0
-    keep[:, 1 : 1 + 3 * groups] = whole[:, None] >= places
+    cells.reshape(frames, channels, point + 8)[:, -1, -1] = ord("\n")
+    digits = np.searchsorted(_POW10[1:], whole, side="right") + 1
+    first = point - digits - negative  # the sign's byte, or the first digit's
+    signed = np.flatnonzero(negative)
+    cells[signed, first[signed]] = ord("-")
+    keep = _KEEP[lead].take(first, axis=0).view(bool)
     return cells[keep].tobytes().decode("ascii")
 
 

@@ -129,14 +129,25 @@ def foot_contacts(
     return clean_contacts(low & slow, min_frames)
 
 
-def canonical_foot_contacts(motion: Motion, **thresholds) -> np.ndarray:
-    """Contacts ``(F, 4)`` of Foot_L, Toes_L, Foot_R, Toes_R for a canonical-skeleton motion."""
+def canonical_foot_positions(motion: Motion) -> np.ndarray:
+    """World positions ``(F, J, 3)`` of a canonical-skeleton motion with only the feet
+    and the joints above them posed (the others zero): what the contacts and the floor
+    read, computed once for both."""
+    return K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=CANONICAL_FOOT_JOINTS)[1]
+
+
+def canonical_foot_contacts(
+    motion: Motion, positions: np.ndarray | None = None, **thresholds
+) -> np.ndarray:
+    """Contacts ``(F, 4)`` of Foot_L, Toes_L, Foot_R, Toes_R for a canonical-skeleton motion;
+    ``positions``, when given, its :func:`canonical_foot_positions`."""
     if motion.skeleton.names != C.JOINTS:
         raise MotionError("expected a motion on the canonical skeleton", kind="unusable")
     thresholds.setdefault("scale", C.leg_length())
-    # with a scale, only the feet's positions are read: the rest of the body is not posed
-    feet = CANONICAL_FOOT_JOINTS if thresholds["scale"] is not None else None
-    gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=feet)[1]
+    if thresholds["scale"] is None:  # the scale is estimated from the whole body
+        gpos = K.global_positions(motion)
+    else:  # only the feet's positions are read: the rest of the body is not posed
+        gpos = canonical_foot_positions(motion) if positions is None else positions
     return foot_contacts(gpos, motion.fps, CANONICAL_FOOT_JOINTS, **thresholds)
 
 

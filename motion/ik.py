@@ -4,6 +4,9 @@ positions is :mod:`motion.fit`).
 Quaternions are (x, y, z, w) as in :mod:`motion.rotations`; positions ``(F, J, 3)``,
 Y up. Everything is vectorised over frames and loops over joints, legs or contact
 segments only. Functions return new arrays and motions and leave their inputs alone.
+A little over 600 lines: the leg IK and the clean-up passes built on it (pinning, the
+flat-foot hold, hips grounding, swing and toe lifts) share private helpers and run
+together on every request.
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ def _frame_rotation(u0: np.ndarray, n0: np.ndarray, u1: np.ndarray, n1: np.ndarr
     def frame(u, n):
         x = _unit(u)
         y = _unit(n - _dot(n, x) * x, _perpendicular(x))
-        return np.stack([x, y, np.cross(x, y)], axis=-1)  # columns
+        return np.stack([x, y, rot.cross(x, y)], axis=-1)  # columns
 
     m = frame(u1, n1) @ np.swapaxes(frame(u0, n0), -1, -2)
     return rot.from_matrix(m)
@@ -153,7 +156,7 @@ def two_bone_ik(
     # the thigh keeps its twist relative to the bend plane, so the knee still bends
     # about its own hinge
     hip_turn = _frame_rotation(
-        thigh, np.cross(line_old, bend_old), thigh_new, np.cross(line_new, bend_new)
+        thigh, rot.cross(line_old, bend_old), thigh_new, rot.cross(line_new, bend_new)
     )
     knee_turn = rot.between(rot.apply(hip_turn, shin), shin_new)
     knee_new = hip + rot.apply(hip_turn, thigh)
@@ -255,20 +258,35 @@ def _pin_offsets(
 
 def _held_rotations(grot: np.ndarray, flat: np.ndarray, blend: int) -> np.ndarray:
     """Global foot rotations ``(F, 4)`` held at each flat contact's average (``flat (F,)``:
-    heel and toe both down), eased in and out over ``blend`` frames around it."""
+    heel and toe both down), eased in and out over ``blend`` frames around it.
+
+    Every contact at once: the ramps fall with the distance to a contact, so each frame
+    outside one follows the nearer of the contacts before and after it (the earlier on a
+    tie), as if each contact had been laid over the frames in turn."""
     frames = len(grot)
-    target = grot.copy()
-    weight = np.zeros(frames)
-    t = np.arange(frames, dtype=np.float64)
-    for start, stop in _runs(flat):
-        run = grot[start:stop]
-        run = np.where(np.sum(run * run[:1], axis=-1, keepdims=True) < 0, -run, run)
-        held = rot.normalize(run.sum(axis=0))
-        w = np.ones(frames)
-        w[:start] = _smoothstep(1.0 - (start - t[:start]) / (blend + 1))
-        w[stop:] = _smoothstep(1.0 - (t[stop:] - stop + 1) / (blend + 1))
-        take = w > weight
-        target[take], weight[take] = held, w[take]
+    target, weight = grot.copy(), np.zeros(frames)
+    runs = _runs(flat)
+    if runs:
+        starts, stops = (np.array(edge) for edge in zip(*runs, strict=True))
+        inside = np.flatnonzero(flat)
+        run_of = np.searchsorted(starts, inside, side="right") - 1
+        run = grot[inside]
+        first = grot[starts][run_of]
+        run = np.where(np.sum(run * first, axis=-1, keepdims=True) < 0, -run, run)
+        total = np.zeros((len(runs), 4))
+        np.add.at(total, run_of, run)  # frame by frame, as run.sum(axis=0) adds them
+        held = rot.normalize(total)
+        t = np.arange(frames, dtype=np.float64)
+        before = np.searchsorted(stops, t, side="right") - 1  # the contact that ended last
+        after = np.searchsorted(starts, t, side="right")  # the next one to start
+        w_before = _smoothstep(1.0 - (t - stops[np.maximum(before, 0)] + 1) / (blend + 1))
+        w_after = _smoothstep(1.0 - (starts[np.minimum(after, len(runs) - 1)] - t) / (blend + 1))
+        w_before[before < 0], w_after[after == len(runs)] = 0.0, 0.0
+        which = np.where(w_after > w_before, after, before)
+        weight = np.maximum(w_before, w_after)
+        which[inside], weight[inside] = run_of, 1.0
+        eased = weight > 0
+        target[eased] = held[which[eased]]
     return rot.slerp(grot, target, weight)
 
 
@@ -312,7 +330,7 @@ def _within_reach(hip, knee, ankle, target) -> np.ndarray:
 def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
     """Forward direction of each knee ``(F, 3)``: the clip's average hinge axis in the
     thigh's frame, or failing that (a leg never bent) the foot's direction."""
-    bend = np.cross(knee - hip, ankle - knee)
+    bend = rot.cross(knee - hip, ankle - knee)
     hinge_local = rot.apply(rot.inv(grot_hip), bend).sum(axis=0)
     scale = rot.norm(knee - hip).mean() * rot.norm(ankle - knee).mean()
     if np.linalg.norm(hinge_local) > 1e-3 * scale * len(hip):
@@ -320,10 +338,10 @@ def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
     elif toe is not None:
         forward = toe - ankle
         forward[:, 1] = 0.0
-        hinge = np.cross(forward, ankle - hip)
+        hinge = rot.cross(forward, ankle - hip)
     else:
         return np.zeros_like(hip)
-    return np.cross(ankle - hip, hinge)
+    return rot.cross(ankle - hip, hinge)
 
 
 def pin_feet(
@@ -368,13 +386,15 @@ def pin_feet(
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
     lrot = motion.lrot.copy()
     if hold_flat_feet and toe_contacts is not None:
-        for i, (_, _, ankle, _) in enumerate(legs):
+        for i, (_, _, ankle, toe) in enumerate(legs):
             flat = contacts[:, i] & toe_contacts[:, i]
             if flat.any():
                 held = _held_rotations(grot[:, ankle], flat, blend)
                 local = rot.mul(rot.inv(grot[:, int(parents[ankle])]), held)
                 lrot[:, ankle] = np.where(_dot(local, lrot[:, ankle]) < 0, -local, local)
-        grot, gpos = K.fk(lrot, motion.lpos, parents, joints=_leg_joints(legs))
+                # only the foot moved: pose it again, not the whole leg
+                foot = [ankle] if toe is None else _chain(parents, ankle, toe) + [toe]
+                K.repose(grot, gpos, lrot, motion.lpos, parents, foot)
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
@@ -444,7 +464,11 @@ CANONICAL_LEGS = [
 
 
 def pin_canonical_feet(
-    motion: Motion, contacts: np.ndarray | None = None, floor_of: Motion | None = None, **options
+    motion: Motion,
+    contacts: np.ndarray | None = None,
+    floor_of: Motion | None = None,
+    floor_positions: np.ndarray | None = None,
+    **options,
 ) -> Motion:
     """:func:`pin_feet` for a canonical motion; ``contacts (F, 4)`` as
     :func:`contacts.canonical_foot_contacts` gives them (Foot_L, Toes_L, Foot_R, Toes_R),
@@ -456,8 +480,9 @@ def pin_canonical_feet(
     With ``floor_of`` (a canonical motion as long, the content a network restyled) the
     planted feet are held on that motion's floor: by bending the knees where they sink
     under it by up to :data:`KNEE_ABSORB` of a leg, by moving the hips for the rest and
-    where they float (:func:`ground_hips`); and after the pinning a toe that dips under that floor where
-    ``contacts`` have it in the air is lifted onto it (:func:`lift_toes`)."""
+    where they float (:func:`ground_hips`); and after the pinning a toe that dips under
+    that floor where ``contacts`` have it in the air is lifted onto it (:func:`lift_toes`).
+    ``floor_positions``, when given, is ``contacts.canonical_foot_positions(floor_of)``."""
     options.setdefault("hold_flat_feet", True)
     for m in (motion, floor_of):
         if m is not None and m.skeleton.names != C.JOINTS:
@@ -471,7 +496,7 @@ def pin_canonical_feet(
                 f"the floor's motion has {floor_of.num_frames} frames, not {motion.num_frames}"
             )
         feet = CT.CANONICAL_FOOT_JOINTS
-        gpos = K.fk(floor_of.lrot, floor_of.lpos, floor_of.skeleton.parents, joints=list(feet))[1]
+        gpos = CT.canonical_foot_positions(floor_of) if floor_positions is None else floor_positions
         found = CT.ground_heights(gpos, feet, C.leg_length())
         levels = dict(zip(feet, found.tolist(), strict=True))
         absorb = KNEE_ABSORB * C.leg_length()

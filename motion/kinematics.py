@@ -60,6 +60,23 @@ def fk(
     return np.moveaxis(grot, 0, -2), np.moveaxis(gpos, 0, -2)
 
 
+def repose(
+    grot: np.ndarray,
+    gpos: np.ndarray,
+    lrot: np.ndarray,
+    lpos: np.ndarray,
+    parents: np.ndarray,
+    joints: list[int],
+) -> None:
+    """:func:`fk`'s ``grot``/``gpos (..., J, 4|3)`` brought up to date in place after the
+    local rotations of ``joints`` (parents first, with every posed joint below them)
+    changed: those joints posed again, by the same arithmetic."""
+    for j in joints:
+        p = parents[j]
+        gpos[..., j, :] = rot.apply(grot[..., p, :], lpos[..., j, :]) + gpos[..., p, :]
+        grot[..., j, :] = rot.mul(grot[..., p, :], lrot[..., j, :])
+
+
 def _with_ancestors(parents: np.ndarray, joints) -> np.ndarray:
     """``(J,)`` bool: ``joints`` and every joint above them."""
     out = np.zeros(len(parents), dtype=bool)

@@ -281,16 +281,17 @@ def _tpose(
                 bones.append(frame.T @ tip)
                 targets.append(_TIP_TEMPLATES[cname])
     swings = dict(zip(names, rot.between(np.array(bones), np.array(targets)), strict=True))
-    tpose = rot.identity((skeleton.num_joints,))
-    for cname in C.JOINTS:  # parents first
-        if cname not in m:
-            continue
+    mapped = [cname for cname in C.JOINTS if cname in m]
+    for cname in mapped:  # parents first
         if cname not in swings:  # leaf or degenerate bone: move rigidly with the parent's swing
             parent = C.PARENTS[C.INDEX[cname]]
             swings[cname] = (
                 swings.get(C.JOINTS[parent], rot.IDENTITY) if parent >= 0 else rot.IDENTITY
             )
-        tpose[m[cname]] = rot.mul(swings[cname], rot.mul(to_body, grot[m[cname]]))
+    joints = [m[cname] for cname in mapped]
+    tpose = rot.identity((skeleton.num_joints,))
+    swing = np.array([swings[cname] for cname in mapped])
+    tpose[joints] = rot.mul(swing, rot.mul(to_body, grot[joints]))  # all joints in one product
     return tpose
 
 

@@ -78,6 +78,21 @@ def apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products ``(..., 3)`` of vectors ``a`` and ``b`` (broadcasting): np.cross's
+    arithmetic without its axis handling, which costs more than the products on the leg
+    IK's arrays."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = ay * bz - az * by
+    out[..., 1] = az * bx - ax * bz
+    out[..., 2] = ax * by - ay * bx
+    return out
+
+
 def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Shortest-arc rotation taking directions ``u`` onto ``v`` (``(..., 3)`` -> ``(..., 4)``).
 
@@ -89,10 +104,10 @@ def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     v = v / np.maximum(norm(v), 1e-12)[..., None]
     u, v = np.broadcast_arrays(u, v)
     w = 1.0 + np.sum(u * v, axis=-1, keepdims=True)
-    axis = np.cross(u, v)
+    axis = cross(u, v)
     # for opposite vectors pick any axis perpendicular to u
-    alt = np.cross(u, np.array([1.0, 0.0, 0.0]))
-    alt2 = np.cross(u, np.array([0.0, 1.0, 0.0]))
+    alt = cross(u, np.array([1.0, 0.0, 0.0]))
+    alt2 = cross(u, np.array([0.0, 1.0, 0.0]))
     alt = np.where(norm(alt)[..., None] < 1e-6, alt2, alt)
     opposite = w < 1e-9
     axis = np.where(opposite, alt, axis)

@@ -432,8 +432,11 @@ class TranslatorEngine(Engine):
             motion = Fe.decode_motion(output, content, face=enc.facing)
         if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
-                contacts = CT.canonical_foot_contacts(content)
-                motion = ik.pin_canonical_feet(motion, contacts, floor_of=content)
+                feet = CT.canonical_foot_positions(content)  # read by both: posed once
+                contacts = CT.canonical_foot_contacts(content, positions=feet)
+                motion = ik.pin_canonical_feet(
+                    motion, contacts, floor_of=content, floor_positions=feet
+                )
         warnings: list[str] = []
         factor = 1.0
         if job.time_warp:

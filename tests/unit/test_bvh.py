@@ -239,7 +239,7 @@ def test_fixed_point_writer_matches_printf():
     rng = np.random.default_rng(3)
     scale = rng.choice([1e-7, 1e-3, 1.0, 50.0, 1e4, 9e7], (200, 31))
     values = rng.standard_normal((200, 31)) * scale
-    values[0, :6] = [0.0, -4e-7, 123456.5, 1000.0, 999.9999999, -100.0]
+    values[0, :8] = [0.0, -4e-7, 123456.5, 1000.0, 999.9999999, -100.0, -98765432109.25, 1e8]
     buf = io.StringIO()
     np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
     want, got = buf.getvalue(), bvh.format_fixed(values)
@@ -301,3 +301,29 @@ def test_decimal_reader_equals_float_of_each_token():
     bad = b"1.0 2.0 1.0.0 3.0\n"
     data = np.frombuffer(bad, dtype=np.uint8)
     assert bvh._decimals(data, bad, np.array([0, 4, 8, 14]), np.array([3, 7, 13, 17])) is None
+
+
+@pytest.mark.parametrize(
+    ("block", "clean"),
+    [
+        (b"1.5 -0 2e-06\r\n\n\t3 +4.25 -.5 \n", True),  # CRLF, tabs, blank lines, exponents
+        (b"1.5 -0 2e-06\n3\x1c4.25 -.5\n", False),  # a control byte: the checked reader
+        (b"1.5 -0 2e-06\n3 4.25\n", False),  # a short line: the checked reader names it
+        (b"1.5 -0 nan\n3 4.25 1\n", False),
+        (b"1.5 -0 1_0\n3 4.25 1\n", False),  # float() reads 1_0, the C reader does not
+        (b"1.5 -0 2e10\n3 4.25 1\n", False),
+    ],
+)
+def test_clean_block_reader_agrees_with_the_checked_reader(block, clean):
+    def read(reader):
+        try:
+            return reader(block, 3, first_line=9)
+        except MotionError as e:
+            return str(e)
+
+    assert (bvh._read_clean_block(block, 3) is not None) == clean
+    got, want = read(bvh._read_block), read(bvh._read_checked_block)
+    if isinstance(want, str):
+        assert got == want
+    else:
+        assert got.tobytes() == want.tobytes()  # bit for bit, -0.0 included

@@ -207,3 +207,27 @@ def test_mirrored_motion_is_the_reflection_with_sides_swapped():
     twice = C.mirrored(mirror)
     np.testing.assert_allclose(twice.lrot, motion.lrot)
     np.testing.assert_allclose(twice.lpos, motion.lpos)
+
+
+def test_repose_equals_fk_after_a_joint_turns():
+    motion = rigs.load_fixture()
+    parents = motion.skeleton.parents
+    turned = int(parents[-1])  # the parent of a leaf, e.g. an ankle
+    below = [turned]
+    for j in range(turned + 1, len(parents)):
+        if int(parents[j]) in below:
+            below.append(j)
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    lrot = motion.lrot.copy()
+    lrot[:, turned] = rot.mul(rot.about_y(np.linspace(0, 1, motion.num_frames)), lrot[:, turned])
+    K.repose(grot, gpos, lrot, motion.lpos, parents, below)
+    want_rot, want_pos = K.fk(lrot, motion.lpos, parents)
+    assert len(below) >= 2
+    assert np.array_equal(grot, want_rot) and np.array_equal(gpos, want_pos)  # bit for bit
+
+
+def test_cross_product_is_numpys():
+    rng = np.random.default_rng(4)
+    a, b = rng.standard_normal((50, 3)), rng.standard_normal((7, 50, 3))
+    assert np.array_equal(rot.cross(a, b), np.cross(a, b))
+    assert np.array_equal(rot.cross(a, [1.0, 0.0, 0.0]), np.cross(a, [1.0, 0.0, 0.0]))
