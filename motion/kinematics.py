@@ -48,7 +48,7 @@ def fk(
     # on long clips and no faster on short ones
     lrot = np.moveaxis(np.broadcast_to(lrot, shape + (4,)), -2, 0)
     lpos = np.moveaxis(np.broadcast_to(lpos, shape + (3,)), -2, 0)
-    posed = _with_ancestors(parents, range(len(lrot)) if joints is None else joints)
+    posed = with_ancestors(parents, range(len(lrot)) if joints is None else joints)
     empty = np.empty if joints is None else np.zeros
     grot, gpos = empty(lrot.shape), empty(lpos.shape)
     grot[0], gpos[0] = lrot[0], lpos[0]
@@ -77,7 +77,7 @@ def repose(
         grot[..., j, :] = rot.mul(grot[..., p, :], lrot[..., j, :])
 
 
-def _with_ancestors(parents: np.ndarray, joints) -> np.ndarray:
+def with_ancestors(parents: np.ndarray, joints) -> np.ndarray:
     """``(J,)`` bool: ``joints`` and every joint above them."""
     out = np.zeros(len(parents), dtype=bool)
     for j in joints:

@@ -429,16 +429,6 @@ def _canonical_sources(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     return np.array(mapped), source[1:]
 
 
-def _above_mapped(parents: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """Mask of the mapped ``joints`` and everything above them."""
-    needed = np.zeros(len(parents), dtype=bool)
-    for j in joints:
-        while j >= 0 and not needed[j]:
-            needed[j] = True
-            j = int(parents[j])
-    return needed
-
-
 def to_canonical(motion: Motion, rig: Rig | None = None, fps: float | None = C.FPS) -> Motion:
     """The motion on the canonical skeleton (at ``fps``; ``None`` keeps the clip's rate)."""
     rig = rig or make_rig(motion.skeleton, motion)
@@ -446,7 +436,7 @@ def to_canonical(motion: Motion, rig: Rig | None = None, fps: float | None = C.F
     frames = motion.num_frames
     mapped, source = _canonical_sources(rig)
     joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
-    grot = _world_rotations(motion.lrot, parents, _above_mapped(parents, joints))
+    grot = _world_rotations(motion.lrot, parents, K.with_ancestors(parents, joints))
     hips = rig.mapping["Hips"]
     hips_pos = motion.lpos[:, hips]  # in the world: up the chain above the hips
     p = int(parents[hips])
@@ -496,7 +486,7 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
         own_lpos[:, 0] = 0.0
     mapped, _ = _canonical_sources(rig)
     joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])
-    cgrot = _world_rotations(canon.lrot, C.PARENTS, _above_mapped(C.PARENTS, mapped))
+    cgrot = _world_rotations(canon.lrot, C.PARENTS, K.with_ancestors(C.PARENTS, mapped))
     target = rot.mul(cgrot[:, mapped], rig.tpose[joints])  # world rotations of mapped joints
     if like is not None:
         # joints in between keep the clip's motion: take out what they add to the bones
@@ -507,7 +497,7 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
     own_lrot[:, roots] = rot.mul(rig.up, own_lrot[:, roots])  # into the upright world
     own_lpos[:, roots] = rot.apply(rig.up, own_lpos[:, roots])
     # world rotations are needed only down to the mapped joints' parents
-    needed = _above_mapped(parents, parents[joints][parents[joints] >= 0])
+    needed = K.with_ancestors(parents, parents[joints][parents[joints] >= 0])
     slot = np.full(sk.num_joints, -1)
     slot[joints] = np.arange(len(joints))
     grot = np.empty((frames, sk.num_joints, 4))
