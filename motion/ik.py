@@ -398,8 +398,8 @@ def pin_feet(
 
     ankles = [leg[2] for leg in legs]
     toes = [leg[3] for leg in legs if leg[3] is not None]
-    leg_len = np.mean([CT.chain_length(motion.skeleton, leg[0], leg[2]) for leg in legs])
     if levels is None:
+        leg_len = np.mean([CT.chain_length(motion.skeleton, leg[0], leg[2]) for leg in legs])
         found = CT.ground_heights(gpos, ankles + toes, leg_len)
         levels = dict(zip(ankles + toes, found, strict=True))
 
