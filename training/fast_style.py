@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import hashlib
 import json
 import os
 import time
@@ -30,7 +31,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from motion import contacts as CT
 from motion import fast_features as FF
+from motion import ik
 from training import fast_common as FC
 
 WEIGHTS = {"pos": 1.0, "bone": 100.0}
@@ -91,14 +94,16 @@ def targets(
 ) -> tuple[list[np.ndarray], dict[str, list[np.ndarray]]]:
     """Fast features of the content clips ``(F, CHANNELS)`` and, per style, of the shipped
     translator's outputs for them, frame for frame. Cached in ``cache/`` under the
-    translator's version."""
+    translator's version and the foot clean-up's code."""
     from training import data as D
     from training.judges import load_engine
 
     engine, entry, _ = load_engine("translator")
     names = styles or list(engine.style_names)
     smoke = "_smoke" if FC.smoke() else ""
-    path = D.cache_dir() / f"fast_targets_{entry.version}{smoke}.npz"
+    # the targets are cleaned up feet too: a change to the clean-up makes new ones
+    cleanup = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in (ik, CT)))
+    path = D.cache_dir() / f"fast_targets_{entry.version}_{cleanup.hexdigest()[:8]}{smoke}.npz"
     if path.exists():
         with np.load(path) as z:
             bounds = np.concatenate([[0], np.cumsum(z["lengths"])])
