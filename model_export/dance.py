@@ -19,7 +19,6 @@ checked before listing: the audio graph at several shapes, the step graph over
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import shutil
 import warnings
 from pathlib import Path
@@ -197,7 +196,7 @@ def export_bundle(
     entry = {
         "name": name,
         "family": "dance",
-        "version": f"{dt.date.today().isoformat()}.1",
+        "version": MF.dated_version(name, models_dir),
         "files": [f"{FOLDER}/audio.onnx", f"{FOLDER}/step.onnx", f"{FOLDER}/stats.npz"],
         "graphs": graph_specs(model),
         "training_data": TRAINING_DATA,

@@ -17,7 +17,6 @@ projection (its odd-length pooling and crop), the TorchScript one keeps it symbo
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import shutil
 import warnings
 from pathlib import Path
@@ -167,7 +166,7 @@ def main(argv: list[str] | None = None) -> dict:
     entry = {
         "name": MODEL_NAME,
         "family": "fast",
-        "version": f"{dt.date.today().isoformat()}.1",
+        "version": MF.dated_version(MODEL_NAME, models_dir),
         "files": files,
         "graphs": graphs,
         "training_data": TRAINING_DATA,

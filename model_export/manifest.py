@@ -8,6 +8,7 @@ entries are left as they are (another family's export may run at another time).
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import os
 from pathlib import Path
@@ -60,6 +61,18 @@ def put_entry(
     models.append(model.model_dump(mode="json"))
     _write(path, {"schema_version": SCHEMA_VERSION, "models": models})
     return model
+
+
+def dated_version(name: str, models_dir: Path = MODELS_DIR) -> str:
+    """Today's date and a count, one above the manifest's entry ``name`` when that entry
+    was exported today too (``2026-11-25.2`` after ``2026-11-25.1``): a re-export is a
+    new version, which registered styles and caches key on."""
+    today = dt.date.today().isoformat()
+    path = Path(models_dir) / MANIFEST_NAME
+    models = json.loads(path.read_text()).get("models", []) if path.exists() else []
+    old = next((str(m.get("version", "")) for m in models if m.get("name") == name), "")
+    day, _, count = old.partition(".")
+    return f"{today}.{int(count) + 1 if day == today and count.isdigit() else 1}"
 
 
 def put_evaluation(

@@ -88,3 +88,15 @@ def test_dance_evaluation_records_its_summary(models):
     assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
         ED.record_in_manifest(report | {"model_version": "2"}, models)
+
+
+def test_a_second_export_on_one_day_is_a_new_version(models):
+    import datetime as dt
+
+    today = dt.date.today().isoformat()
+    assert MF.dated_version("translator-test", models) == f"{today}.1"  # "1" is not today's
+    assert MF.dated_version("not-there", models) == f"{today}.1"
+    MF.put_entry(entry(f"{today}.1"), models)
+    assert MF.dated_version("translator-test", models) == f"{today}.2"
+    MF.put_entry(entry(f"{today}.9"), models)
+    assert MF.dated_version("translator-test", models) == f"{today}.10"
