@@ -70,7 +70,8 @@ export-fast: $(VENV)/.dev
 # Both style families on motion from outside Bandai (CMU, Xia, CMU dance, other rigs' exports)
 # judged by a style classifier of every real Bandai take (training/eval_foreign.py): the
 # development half by default; EVAL_FOREIGN_ARGS="--half test" (or both, --manifest) for more.
-# Writes runs/eval/foreign-<half>.json; the classifier is kept in runs/eval/classifiers.
+# Writes runs/eval/foreign-<half>.json; the judge is the committed training/foreign_judge.pt
+# (EVAL_FOREIGN_ARGS=--pin-judge trains and replaces it).
 EVAL_FOREIGN_ARGS ?=
 .PHONY: eval-foreign
 eval-foreign: $(VENV)/.dev

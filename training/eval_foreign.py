@@ -1,7 +1,8 @@
 """The shipped style families judged on motion from outside Bandai, as a user would send it.
 
     python -m training.eval_foreign [--half dev|test|both] [--families translator fast]
-        [--classifier-cache DIR] [--out-dir DIR] [--limit N] [--manifest]
+        [--judge FILE | --pin-judge] [--classifier-cache DIR] [--out-dir DIR] [--limit N]
+        [--manifest]
 
 writes ``foreign-<half>.json`` for each half judged (default ``runs/eval/``) and prints its
 tables; ``--manifest`` records the test half's figures in each model's manifest entry
@@ -30,8 +31,12 @@ Style judge: the convolutional window classifier of ``training.judges``
 image, with the 16 merged style names (``motion.styles``); a clip's distribution is its
 windows' mean log-probability, so top-3 is read from it. Its reference ("real clips") is
 leave-action-out: five folds by action group (walks, runs, waves, raises, the rest), each
-judged by networks that never saw that group. Trained classifiers and the reference are
-cached by a hash of the code and the takes.
+judged by networks that never saw that group. The judge every evaluation uses is the
+committed ``training/foreign_judge.pt`` (``--pin-judge`` replaces it): trained again, on
+another machine or after an edit to the code it reads motion through, it comes out
+different, and the same outputs score 3-4 points apart. It carries what it said of a few
+real takes and refuses to judge if it now says otherwise (the features changed). Without
+it, trained classifiers and the reference are cached by a hash of the code and the takes.
 
 Style or actor: in Bandai dataset-2 each style is one actor, three actors sharing seven
 styles. Every clip is retargeted onto one canonical skeleton (bone lengths averaged over
@@ -97,6 +102,8 @@ VARIANT_FOLDERS, VARIANT_TAKES = ("cmu-31", "xia"), 2  # takes per folder and ha
 T_POSE_FIRST = ("cmu-31",)  # folders whose files open with cgspeed's synthetic T-pose frame
 EFFECTORS = [C.INDEX[n] for n in ("Hand_L", "Hand_R", "Foot_L", "Foot_R")]
 KEPT = 0.85  # content-kept correlation counted as kept
+PINNED_JUDGE = REPO / "training" / "foreign_judge.pt"  # the yardstick, committed
+CHECK_TAKES = 6  # real takes a pinned judge re-judges when loaded
 ACTOR_GROUPS = (
     ("active", "elderly", "exhausted"),
     ("feminine", "youthful"),
@@ -378,8 +385,11 @@ def judge_key(clips: list) -> str:
     return key.hexdigest()
 
 
-def judge_for(clips: list, cache: Path | None) -> StyleJudge:
-    """:func:`train_judge`, kept in ``cache`` under :func:`judge_key`."""
+def judge_for(clips: list, cache: Path | None, pinned: Path | None = None) -> StyleJudge:
+    """The ``pinned`` judge where that file exists (:func:`pinned_judge`), else
+    :func:`train_judge`, kept in ``cache`` under :func:`judge_key`."""
+    if pinned is not None and pinned.exists():
+        return pinned_judge(pinned, clips)
     if cache is None:
         return train_judge(clips)
     path = Path(cache) / f"foreign-judge-{judge_key(clips)[:16]}.pkl"
@@ -392,6 +402,44 @@ def judge_for(clips: list, cache: Path | None) -> StyleJudge:
     with partial.open("wb") as f:
         pickle.dump(judge, f)
     partial.replace(path)
+    return judge
+
+
+def pin_judge(judge: StyleJudge, clips: list, path: Path = PINNED_JUDGE) -> None:
+    """Write ``judge`` as the yardstick later evaluations use (:func:`pinned_judge`), with
+    what it says of the first :data:`CHECK_TAKES` real takes. A judge trained again on
+    another machine, or after any edit to the code it is keyed on, comes out different
+    (3-4 points of top-1 on the same outputs), so figures only compare under one file."""
+    import torch
+
+    check = sorted(clips, key=lambda c: c.take)[:CHECK_TAKES]
+    state = {
+        "classifier": judge.classifier.state(),
+        "held_out": [{**h, "logp": torch.from_numpy(h["logp"])} for h in judge.held_out],
+        "trained_under": judge_key(clips),
+        "check": {c.take: torch.from_numpy(judge.log_probabilities(c.motion)) for c in check},
+    }
+    torch.save(state, path)
+
+
+def pinned_judge(path: Path, clips: list) -> StyleJudge:
+    """The judge :func:`pin_judge` wrote, once it judges its check takes among ``clips`` as
+    it did then: otherwise the features it reads have changed, and it refuses."""
+    import torch
+
+    state = torch.load(path, weights_only=True)
+    judge = StyleJudge(
+        ConvClipClassifier.from_state(state["classifier"]),
+        [{**h, "logp": h["logp"].numpy()} for h in state["held_out"]],
+    )
+    by_take = {c.take: c for c in clips}
+    for take, said in state["check"].items():
+        now = judge.log_probabilities(by_take[take].motion) if take in by_take else None
+        if now is None or not np.allclose(now, said.numpy(), atol=1e-4):
+            raise ValueError(
+                f"{path} judges take {take} differently now: the features it reads changed; "
+                "train a new judge and pin it (python -m training.eval_foreign --pin-judge)"
+            )
     return judge
 
 
@@ -653,17 +701,24 @@ def evaluate(
     classifier_cache: Path | None = None,
     limit: int | None = None,
     log=print,
+    pinned: Path | None = None,
+    pin: bool = False,
 ) -> dict[str, dict]:
     """The report of each of ``halves`` (see the module docstring); ``limit``: only the first
-    N items of each half (a smoke run)."""
+    N items of each half (a smoke run). The judge is the ``pinned`` file where it exists,
+    else trained (and kept in ``classifier_cache``); ``pin`` writes it to
+    :data:`PINNED_JUDGE`."""
     from model_export.manifest import measuring_machine
     from training.data import load_bandai
 
     started = time.time()
     clips = load_bandai()
-    judge = judge_for(clips, classifier_cache)
+    judge = judge_for(clips, classifier_cache, pinned)
+    if pin:
+        pin_judge(judge, clips)
     seconds = {"judge": round(time.time() - started, 1)}
-    log(f"judge ready ({seconds['judge']} s)")
+    source = pinned if pinned is not None and pinned.exists() else "trained"
+    log(f"judge ready ({source}, {seconds['judge']} s)")
     t = time.time()
     real = real_bandai(clips)
     ref = reference(judge)
@@ -888,6 +943,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--out-dir", type=Path, default=REPO / "runs/eval", help="writes foreign-<half>.json here"
     )
+    p.add_argument(
+        "--judge",
+        type=Path,
+        default=PINNED_JUDGE,
+        help="the pinned judge (default the committed one); trained when the file is missing",
+    )
+    p.add_argument(
+        "--pin-judge",
+        action="store_true",
+        help="train a judge (or take the cached one) and write it to the committed file",
+    )
     p.add_argument("--limit", type=int, default=None, help="only the first N items of each half")
     p.add_argument(
         "--manifest",
@@ -898,7 +964,14 @@ def main(argv: list[str] | None = None) -> int:
     halves = HALVES if args.half == "both" else (args.half,)
     if args.manifest and ("test" not in halves or args.limit):
         p.error("--manifest records the whole test half: use --half test or both, no --limit")
-    reports = evaluate(halves, tuple(args.families), args.classifier_cache, args.limit)
+    reports = evaluate(
+        halves,
+        tuple(args.families),
+        args.classifier_cache,
+        args.limit,
+        pinned=None if args.pin_judge else args.judge,
+        pin=args.pin_judge,
+    )
     args.out_dir.mkdir(parents=True, exist_ok=True)
     for h, report in reports.items():
         print()

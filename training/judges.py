@@ -82,6 +82,20 @@ def frame_features(motion: Motion, mirror: bool = False) -> np.ndarray:
     return np.concatenate(flat, axis=1).astype(np.float32)
 
 
+def _conv_net(channels: int, classes: int):
+    """:class:`ConvClipClassifier`'s network: three convolutions, mean over time, dropout,
+    linear."""
+    from torch import nn
+
+    return nn.Sequential(
+        nn.Conv1d(channels, 64, 5, padding=2), nn.LeakyReLU(0.2),
+        nn.Conv1d(64, 96, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+        nn.Conv1d(96, 128, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
+        nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Dropout(0.3),
+        nn.Linear(128, classes),
+    )  # fmt: skip
+
+
 class ConvClipClassifier:
     """Small 1D convolutional networks on :func:`frame_features` of 48-frame windows (three
     convolutions, mean over time, dropout, linear), trained on random windows with Gaussian
@@ -128,17 +142,10 @@ class ConvClipClassifier:
     def _train_on_this_thread(self, clips: list[np.ndarray], y: np.ndarray, seed: int, steps: int):
         import torch
         import torch.nn.functional as F
-        from torch import nn
 
         torch.manual_seed(seed)
         rng = np.random.default_rng(seed)
-        net = nn.Sequential(
-            nn.Conv1d(clips[0].shape[1], 64, 5, padding=2), nn.LeakyReLU(0.2),
-            nn.Conv1d(64, 96, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv1d(96, 128, 4, stride=2, padding=1), nn.LeakyReLU(0.2),
-            nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Dropout(0.3),
-            nn.Linear(128, len(self.classes)),
-        )  # fmt: skip
+        net = _conv_net(clips[0].shape[1], len(self.classes))
         opt = torch.optim.Adam(net.parameters(), lr=1e-3, weight_decay=1e-4)
         by_class = [np.flatnonzero(y == k) for k in range(len(self.classes))]
         for _ in range(steps):
@@ -154,6 +161,30 @@ class ConvClipClassifier:
             loss.backward()
             opt.step()
         return net.eval()
+
+    def state(self) -> dict:
+        """What :meth:`from_state` rebuilds it from: tensors, strings and lists only, so
+        ``torch.load(..., weights_only=True)`` reads it back."""
+        import torch
+
+        return {
+            "mean": torch.from_numpy(np.asarray(self.mean)),
+            "std": torch.from_numpy(np.asarray(self.std)),
+            "classes": list(self.classes),
+            "nets": [net.state_dict() for net in self.nets],
+        }
+
+    @classmethod
+    def from_state(cls, state: dict) -> ConvClipClassifier:
+        clf = cls.__new__(cls)
+        clf.mean, clf.std = state["mean"].numpy(), state["std"].numpy()
+        clf.classes = list(state["classes"])
+        clf.nets = []
+        for weights in state["nets"]:
+            net = _conv_net(len(clf.mean), len(clf.classes))
+            net.load_state_dict(weights)
+            clf.nets.append(net.eval())
+        return clf
 
     def _prepare(self, features: np.ndarray) -> np.ndarray:
         x = ((features - self.mean) / self.std).astype(np.float32)

@@ -271,3 +271,33 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
     with pytest.raises(ValueError, match="test half"):
         EF.record_in_manifest({**report, "half": "dev"}, models)
+
+
+def test_a_pinned_judge_reads_back_the_same_and_refuses_changed_features(tmp_path):
+    from dataclasses import replace
+
+    from training.data import clip_from_motion
+    from training.judges import ConvClipClassifier, frame_features
+
+    clips = [
+        clip_from_motion(swinging(hz=hz), name=n, dataset="d", take=n, style=s, content="walk")
+        for n, hz, s in (("a", 1.0, "old"), ("b", 1.5, "happy"))
+    ]
+    classifier = ConvClipClassifier(
+        [frame_features(c.motion) for c in clips], ["old", "happy"], seeds=(0,), steps=3
+    )
+    held_out = [{"take": "a", "style": "old", "group": "walks", "logp": np.log([0.3, 0.7])}]
+    judge = EF.StyleJudge(classifier, held_out)
+    path = tmp_path / "judge.pt"
+    EF.pin_judge(judge, clips, path)
+    back = EF.pinned_judge(path, clips)
+    assert back.classes == judge.classes and back.held_out[0]["take"] == "a"
+    np.testing.assert_array_equal(back.held_out[0]["logp"], held_out[0]["logp"])
+    for c in clips:
+        np.testing.assert_array_equal(
+            back.log_probabilities(c.motion), judge.log_probabilities(c.motion)
+        )
+    faster = clip_from_motion(swinging(hz=2.5), name="b", dataset="d", take="b", style="happy")
+    with pytest.raises(ValueError, match="judges take b differently"):
+        EF.pinned_judge(path, [clips[0], replace(faster, content="walk")])
+    assert EF.judge_for(clips, None, path).classes == judge.classes  # the file, not training
