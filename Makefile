@@ -62,7 +62,7 @@ FAST_STYLE_ARGS ?=
 .PHONY: train-fast export-fast bench-fast show-styles
 train-fast: $(VENV)/.dev
 	$(if $(wildcard checkpoints/fast/autoencoder.pt),,$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS))
-	$(PY) -m training.fast_style --all --threads 1 $(FAST_STYLE_ARGS)
+	$(PY) -m training.fast_style --all --threads 1 --jobs 2 $(FAST_STYLE_ARGS)
 
 export-fast: $(VENV)/.dev
 	$(PY) -m model_export.fast

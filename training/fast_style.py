@@ -1,7 +1,7 @@
 """Train the fast style networks (holden2017's feed-forward transformation networks, one
 per style) by distillation from the shipped translator.
 
-    python -m training.fast_style --all [--steps N] [--minutes-per-style M]
+    python -m training.fast_style --all [--jobs 2] [--steps N] [--minutes-per-style M]
     python -m training.fast_style --style angry
 
 The paper's loss (content and Gram-matrix style terms on the loss network's hidden units)
@@ -23,8 +23,10 @@ import argparse
 import datetime as dt
 import hashlib
 import json
+import multiprocessing
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +58,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.add_argument(f"--w-{name}", type=float, default=value, help=f"{name} loss weight")
     p.add_argument("--checkpoint-dir", default=str(FC.CHECKPOINTS))
     p.add_argument("--log-dir", default=str(FC.RUNS), help="TensorBoard and text logs")
-    p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--threads", type=int, default=None, help="torch threads per process")
+    p.add_argument("--jobs", type=int, default=1, help="styles trained at once, one process each")
     p.add_argument("--seed", type=int, default=0)
     return p.parse_args(argv)
 
@@ -203,34 +206,44 @@ class StyleTrainer:
         return net, result
 
 
-def main(argv: list[str] | None = None) -> dict:
-    args = parse_args(argv)
-    if FC.smoke():
-        args.max_steps = args.max_steps or 3
+def train_style(name: str, args: argparse.Namespace) -> dict:
+    """One style's network trained and saved to ``<checkpoint-dir>/style_<name>.pt``; its
+    targets read from the cache :func:`targets` made."""
     if args.threads:
         torch.set_num_threads(args.threads)
     ckpt_dir = Path(args.checkpoint_dir)
     ae = load_autoencoder(ckpt_dir / "autoencoder.pt")
     stats = FF.FastStats.load(ckpt_dir / "stats.npz")
-    content, by_style = targets(None if args.all else args.style)
-    summary = {}
-    for name, target in by_style.items():
-        trainer = StyleTrainer(name, content, target, ae, stats, args)
-        log = FC.Logger(f"style_{name}", Path(args.log_dir))
-        net, result = trainer.train(log)
-        log.close()
-        result["trained_at"] = dt.date.today().isoformat()
-        torch.save(
-            {
-                "model": net.state_dict(),
-                "config": {"hidden": args.hidden, "width": FC.WIDTH, "style": name},
-                "result": result,
-            },
-            ckpt_dir / f"style_{name}.pt",
-        )
-        summary[name] = result
-        print(f"style {name}: {json.dumps(result)}", flush=True)
-    return summary
+    content, by_style = targets([name])
+    log = FC.Logger(f"style_{name}", Path(args.log_dir))
+    net, result = StyleTrainer(name, content, by_style[name], ae, stats, args).train(log)
+    log.close()
+    result["trained_at"] = dt.date.today().isoformat()
+    torch.save(
+        {
+            "model": net.state_dict(),
+            "config": {"hidden": args.hidden, "width": FC.WIDTH, "style": name},
+            "result": result,
+        },
+        ckpt_dir / f"style_{name}.pt",
+    )
+    print(f"style {name}: {json.dumps(result)}", flush=True)
+    return result
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    if FC.smoke():
+        args.max_steps = args.max_steps or 3
+    names = list(targets(None if args.all else args.style)[1])  # made and cached once
+    if args.jobs == 1:
+        return {name: train_style(name, args) for name in names}
+    # one style per process, each seeded as alone (the same networks as one after another);
+    # spawned, as torch's thread pools do not survive a fork
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:
+        results = pool.map(train_style, names, [args] * len(names))
+        return dict(zip(names, results, strict=True))
 
 
 if __name__ == "__main__":
