@@ -206,17 +206,18 @@ class StyleTrainer:
         return net, result
 
 
-def train_style(name: str, args: argparse.Namespace) -> dict:
-    """One style's network trained and saved to ``<checkpoint-dir>/style_<name>.pt``; its
-    targets read from the cache :func:`targets` made."""
+def train_style(
+    name: str, args: argparse.Namespace, content: list[np.ndarray], target: list[np.ndarray]
+) -> dict:
+    """One style's network trained on :func:`targets`' ``content`` and its ``target`` and
+    saved to ``<checkpoint-dir>/style_<name>.pt``."""
     if args.threads:
         torch.set_num_threads(args.threads)
     ckpt_dir = Path(args.checkpoint_dir)
     ae = load_autoencoder(ckpt_dir / "autoencoder.pt")
     stats = FF.FastStats.load(ckpt_dir / "stats.npz")
-    content, by_style = targets([name])
     log = FC.Logger(f"style_{name}", Path(args.log_dir))
-    net, result = StyleTrainer(name, content, by_style[name], ae, stats, args).train(log)
+    net, result = StyleTrainer(name, content, target, ae, stats, args).train(log)
     log.close()
     result["trained_at"] = dt.date.today().isoformat()
     torch.save(
@@ -231,18 +232,26 @@ def train_style(name: str, args: argparse.Namespace) -> dict:
     return result
 
 
+def train_style_from_cache(name: str, args: argparse.Namespace) -> dict:
+    """:func:`train_style` in a process of its own: its targets read from the cache."""
+    content, by_style = targets([name])
+    return train_style(name, args, content, by_style[name])
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
     if FC.smoke():
         args.max_steps = args.max_steps or 3
-    names = list(targets(None if args.all else args.style)[1])  # made and cached once
+    content, by_style = targets(None if args.all else args.style)  # made and cached once
     if args.jobs == 1:
-        return {name: train_style(name, args) for name in names}
+        return {name: train_style(name, args, content, t) for name, t in by_style.items()}
+    names = list(by_style)
+    del content, by_style  # each process reads its own style from the cache
     # one style per process, each seeded as alone (the same networks as one after another);
     # spawned, as torch's thread pools do not survive a fork
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:
-        results = pool.map(train_style, names, [args] * len(names))
+        results = pool.map(train_style_from_cache, names, [args] * len(names))
         return dict(zip(names, results, strict=True))
 
 
