@@ -352,6 +352,7 @@ def pin_feet(
     toe_contacts: np.ndarray | None = None,
     hold_flat_feet: bool = False,
     levels: dict[int, float] | None = None,
+    posed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Motion:
     """Foot-contact clean-up: each foot held still during its contacts, by leg IK.
 
@@ -371,7 +372,9 @@ def pin_feet(
     it bends. With ``hold_flat_feet`` (and toe contacts) a foot flat on the ground also
     keeps one orientation, its average over the contact: generated motion turns planted
     feet about, which slides whatever point of the foot is not the held one. Works on
-    any skeleton given the joint indices.
+    any skeleton given the joint indices. ``posed``: the legs' forward kinematics
+    (:func:`kinematics.fk` with the legs' joints), when the caller has it; used up (its
+    arrays change in place).
     """
     contacts = np.asarray(contacts, dtype=bool)
     frames = motion.num_frames
@@ -383,7 +386,10 @@ def pin_feet(
             raise MotionError(f"toe contacts must be {contacts.shape}, got {toe_contacts.shape}")
     blend = int(round(BLEND_SECONDS * motion.fps)) if blend_frames is None else int(blend_frames)
     parents = motion.skeleton.parents
-    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
+    if posed is None:
+        grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
+    else:
+        grot, gpos = posed
     lrot = motion.lrot.copy()
     if hold_flat_feet and toe_contacts is not None:
         for i, (_, _, ankle, toe) in enumerate(legs):
@@ -403,18 +409,21 @@ def pin_feet(
         found = CT.ground_heights(gpos, ankles + toes, leg_len)
         levels = dict(zip(ankles + toes, found, strict=True))
 
-    for i, (hip, knee, ankle, toe) in enumerate(legs):
+    offsets = []
+    for i, (_, _, ankle, toe) in enumerate(legs):
         toe_c = None if toe_contacts is None or toe is None else toe_contacts[:, i]
-        offsets = _pin_offsets(
-            gpos[:, ankle],
-            None if toe is None else gpos[:, toe],
-            contacts[:, i],
-            toe_c,
-            levels[ankle],
-            levels[toe] if toe is not None else levels[ankle],
-            blend,
+        offsets.append(
+            _pin_offsets(
+                gpos[:, ankle],
+                None if toe is None else gpos[:, toe],
+                contacts[:, i],
+                toe_c,
+                levels[ankle],
+                levels[toe] if toe is not None else levels[ankle],
+                blend,
+            )
         )
-        _move_ankles(lrot, grot, gpos, parents, (hip, knee, ankle, toe), offsets)
+    _move_ankles(lrot, grot, gpos, parents, legs, offsets)
     return motion.replace(lrot=lrot)
 
 
@@ -423,29 +432,53 @@ def _move_ankles(
     grot: np.ndarray,
     gpos: np.ndarray,
     parents: np.ndarray,
-    leg: tuple[int, int, int, int | None],
-    offsets: np.ndarray,
+    legs: list[tuple[int, int, int, int | None]],
+    offsets: list[np.ndarray],
 ) -> None:
-    """Moves ``leg``'s ankle by ``offsets (F, 3)`` where they are not zero, by leg IK, in
-    ``lrot`` (in place; ``grot``/``gpos`` its forward kinematics before). Hip and knee
-    turn; the ankle keeps its global rotation; the knee bends the way it bends."""
-    hip, knee, ankle, toe = leg
-    f = np.nonzero(np.any(offsets != 0.0, axis=-1))[0]
-    if not len(f):
-        return
-    pos = gpos[f]
-    pole = _knee_poles(
-        grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
-        None if toe is None else gpos[:, toe],
-    )[f]  # fmt: skip
-    target = _within_reach(pos[:, hip], pos[:, knee], pos[:, ankle], pos[:, ankle] + offsets[f])
-    leg_ik = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, pole, REACH_EPS)
+    """Moves each leg's ankle by its ``offsets (F, 3)`` where they are not zero, by leg
+    IK, in ``lrot`` (in place; ``grot``/``gpos`` its forward kinematics before). Hip and
+    knee turn; the ankle keeps its global rotation; the knee bends the way it bends.
 
-    # new global rotations along the leg; the ankle keeps its own
+    Every leg's moved frames go through one IK solve, laid end to end (the IK is per
+    frame): on a short clip the cost is numpy's per-call overhead, paid once, not per leg."""
+    moved = [np.nonzero(np.any(o != 0.0, axis=-1))[0] for o in offsets]
+    todo = [(leg, f, o[f]) for leg, f, o in zip(legs, moved, offsets, strict=True) if len(f)]
+    if not todo:
+        return
+    poles = [
+        _knee_poles(
+            grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
+            None if toe is None else gpos[:, toe],
+        )[f]
+        for (hip, knee, ankle, toe), f, _ in todo
+    ]  # fmt: skip
+    hip, knee, ankle = (np.concatenate([gpos[f, leg[k]] for leg, f, _ in todo]) for k in range(3))
+    shift = np.concatenate([o for _, _, o in todo])
+    target = _within_reach(hip, knee, ankle, ankle + shift)
+    leg_ik = two_bone_ik(hip, knee, ankle, target, np.concatenate(poles), REACH_EPS)
+
+    bounds = np.cumsum([0] + [len(f) for _, f, _ in todo])
+    for (leg, f, _), start, stop in zip(todo, bounds[:-1], bounds[1:], strict=True):
+        hip_turn, knee_turn = leg_ik.hip_turn[start:stop], leg_ik.knee_turn[start:stop]
+        _turn_leg(lrot, grot, parents, leg, f, hip_turn, knee_turn)
+
+
+def _turn_leg(
+    lrot: np.ndarray,
+    grot: np.ndarray,
+    parents: np.ndarray,
+    leg: tuple[int, int, int, int | None],
+    f: np.ndarray,
+    hip_turn: np.ndarray,
+    knee_turn: np.ndarray,
+) -> None:
+    """``lrot``'s leg joints at frames ``f`` turned by an IK solution (world-frame turns
+    of the thigh and, after it, the shin); the ankle keeps its global rotation."""
+    hip, knee, ankle, _ = leg
     new_grot = {}
     for j in _chain(parents, hip, knee):
-        new_grot[j] = rot.mul(leg_ik.hip_turn, grot[f, j])
-    shin_turn = rot.mul(leg_ik.knee_turn, leg_ik.hip_turn)
+        new_grot[j] = rot.mul(hip_turn, grot[f, j])
+    shin_turn = rot.mul(knee_turn, hip_turn)
     for j in _chain(parents, knee, ankle):
         new_grot[j] = rot.mul(shin_turn, grot[f, j])
     new_grot[ankle] = grot[f, ankle]
@@ -499,9 +532,9 @@ def pin_canonical_feet(
         gpos = CT.canonical_foot_positions(floor_of) if floor_positions is None else floor_positions
         found = CT.ground_heights(gpos, feet, C.leg_length())
         levels = dict(zip(feet, found.tolist(), strict=True))
-        absorb = KNEE_ABSORB * C.leg_length()
-        motion = ground_hips(motion, contacts, levels, C.INDEX["Hips"], absorb=absorb)
         options["levels"] = levels
+        if contacts.any():  # ground_hips, on the legs posed once for it and the pinning
+            motion, options["posed"] = _grounded(motion, contacts, levels)
     pinned = pin_feet(
         motion, contacts[:, [0, 2]], CANONICAL_LEGS, toe_contacts=contacts[:, [1, 3]], **options
     )
@@ -511,6 +544,24 @@ def pin_canonical_feet(
     clearance = np.minimum(np.maximum(gpos[:, feet, 1] - found[None], 0.0), cap)
     raised = lift_swing_feet(pinned, levels, contacts, clearance[:, [0, 2]])
     return lift_toes(raised, levels, contacts[:, [1, 3]], CANONICAL_LEGS, clearance[:, [1, 3]])
+
+
+def _grounded(
+    motion: Motion, contacts: np.ndarray, levels: dict[int, float]
+) -> tuple[Motion, tuple[np.ndarray, np.ndarray]]:
+    """:func:`ground_hips` of a canonical ``motion`` (knees absorbing ``KNEE_ABSORB``), and
+    its legs' forward kinematics for :func:`pin_feet`: posed once, then shifted with the
+    hips (the canonical root only turns about the vertical, so a rise of the hips raises
+    every joint below them by as much)."""
+    legs = _leg_joints(CANONICAL_LEGS)
+    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=legs)
+    sigma = GROUNDING_SECONDS * motion.fps
+    shift = _grounding_shift(gpos, contacts, levels, sigma, KNEE_ABSORB * C.leg_length())
+    lpos = motion.lpos.copy()
+    lpos[:, C.INDEX["Hips"], 1] += shift
+    below_hips = np.flatnonzero(K.with_ancestors(motion.skeleton.parents, legs))[1:]
+    gpos[:, below_hips, 1] += shift[:, None]
+    return motion.replace(lpos=lpos), (grot, gpos)
 
 
 def _widened_smooth(x: np.ndarray, sigma: float) -> np.ndarray:
@@ -543,6 +594,7 @@ def lift_swing_feet(
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(CANONICAL_LEGS))
     lrot = motion.lrot.copy()
     sigma = sigma_seconds * motion.fps
+    offsets = []
     for i, leg in enumerate(CANONICAL_LEGS):
         ankle = leg[2]
         planted = contacts[:, 2 * i] | contacts[:, 2 * i + 1]
@@ -550,9 +602,9 @@ def lift_swing_feet(
         low[planted] = 0.0
         lift = _widened_smooth(low, sigma)
         lift[planted | (lift < 1e-6)] = 0.0
-        offsets = np.zeros((motion.num_frames, 3))
-        offsets[:, 1] = lift
-        _move_ankles(lrot, grot, gpos, parents, leg, offsets)
+        offsets.append(np.zeros((motion.num_frames, 3)))
+        offsets[-1][:, 1] = lift
+    _move_ankles(lrot, grot, gpos, parents, CANONICAL_LEGS, offsets)
     return motion.replace(lrot=lrot)
 
 
@@ -637,16 +689,25 @@ def ground_hips(
         raise MotionError(
             f"contacts must be ({motion.num_frames}, {len(feet)}), got {contacts.shape}"
         )
-    held = contacts.any(axis=1)
-    if not held.any():
+    if not contacts.any():
         return motion
     gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=feet)[1]
-    gap = np.array([levels[j] for j in feet])[None] - gpos[:, feet, 1]
-    frames = np.arange(motion.num_frames)
-    lowest = np.where(contacts, gap, -np.inf).max(axis=1)
-    shift = np.interp(frames, frames[held], lowest[held])
-    shift = gaussian_filter1d(shift, sigma_seconds * motion.fps, mode="nearest")
-    shift = np.where(shift > 0.0, np.maximum(shift - absorb, 0.0), shift)
+    shift = _grounding_shift(gpos, contacts, levels, sigma_seconds * motion.fps, absorb)
     lpos = motion.lpos.copy()
     lpos[:, hips, 1] += shift
     return motion.replace(lpos=lpos)
+
+
+def _grounding_shift(
+    gpos: np.ndarray, contacts: np.ndarray, levels: dict[int, float], sigma: float, absorb: float
+) -> np.ndarray:
+    """:func:`ground_hips`'s vertical shift ``(F,)`` of the hips, from the foot joints'
+    positions ``gpos (F, J, 3)``; ``sigma`` in frames; some frame must have a contact."""
+    feet = list(levels)
+    held = contacts.any(axis=1)
+    gap = np.array([levels[j] for j in feet])[None] - gpos[:, feet, 1]
+    frames = np.arange(len(gpos))
+    lowest = np.where(contacts, gap, -np.inf).max(axis=1)
+    shift = np.interp(frames, frames[held], lowest[held])
+    shift = gaussian_filter1d(shift, sigma, mode="nearest")
+    return np.where(shift > 0.0, np.maximum(shift - absorb, 0.0), shift)

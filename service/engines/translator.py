@@ -432,7 +432,7 @@ class TranslatorEngine(Engine):
             motion = Fe.decode_motion(output, content, face=enc.facing)
         if job.foot_cleanup:
             with timer.stage("foot_cleanup"):
-                feet = CT.canonical_foot_positions(content)  # read by both: posed once
+                feet = enc.gpos  # the features' FK: contacts and floor read the content posed once
                 contacts = CT.canonical_foot_contacts(content, positions=feet)
                 motion = ik.pin_canonical_feet(
                     motion, contacts, floor_of=content, floor_positions=feet
