@@ -123,7 +123,11 @@ def _refine(
         if not sub:
             continue
         now = gpos[:, sub] - gpos[:, j, None]
-        turn, _ = _kabsch(now, targets[:, sub] - gpos[:, j, None])
+        wanted = targets[:, sub] - gpos[:, j, None]
+        if len(sub) == 1:  # one joint: aimed, as Kabsch would, at a fraction of its cost
+            turn = rot.between(now[:, 0], wanted[:, 0])
+        else:
+            turn, _ = _kabsch(now, wanted)
         gpos[:, sub] = gpos[:, j, None] + rot.apply(turn[:, None], now)
     return gpos
 
