@@ -114,11 +114,13 @@ def _save_cache(path: Path, clips: list[Clip], fingerprint: str) -> None:
     os.replace(tmp, path)
 
 
-def _load_cache(path: Path, fingerprint: str) -> list[Clip] | None:
+def _load_cache(path: Path, fingerprint: str | None) -> list[Clip] | None:
+    """The clips of a cache file; ``None`` where it is missing or was built from other
+    sources than ``fingerprint`` says (any, where ``None``)."""
     if not path.exists():
         return None
     with np.load(path) as z:
-        if str(z["fingerprint"]) != fingerprint:
+        if fingerprint is not None and str(z["fingerprint"]) != fingerprint:
             return None
         meta = json.loads(str(z["meta"]))
         bounds = np.concatenate([[0], np.cumsum(z["lengths"])])
@@ -127,6 +129,15 @@ def _load_cache(path: Path, fingerprint: str) -> list[Clip] | None:
         Clip(lrot=lrot[a:b], root=root[a:b], **m)
         for m, a, b in zip(meta, bounds[:-1], bounds[1:], strict=True)
     ]
+
+
+def read_clips(path: Path) -> list[Clip]:
+    """The clips of a cache file (``cache/bandai1.npz``, ...) whatever sources it was built
+    from: a dataset carried to a machine without the data folder."""
+    clips = _load_cache(Path(path), None)
+    if clips is None:
+        raise FileNotFoundError(path)
+    return clips
 
 
 def _cached(name: str, sources: list[Path], build) -> list[Clip]:

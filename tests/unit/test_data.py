@@ -98,3 +98,21 @@ def test_unlabelled_motion_is_every_non_bandai_clip_without_labels():
     for c in clips[::6]:
         g = K.global_positions(c.motion)
         assert np.median(g[:, C.INDEX["Head"], 1] - g[:, C.INDEX["Hips"], 1]) > 30, c.name
+
+
+def test_a_cache_file_reads_back_without_the_data_it_was_built_from(bandai, tmp_path):
+    """``read_clips`` (``fit --clips``, for a machine without the data folder) gives the
+    clips a cache file holds, labels and arrays alike, whatever sources built it."""
+    clips = bandai[:5]
+    path = tmp_path / "some.npz"
+    data._save_cache(path, clips, fingerprint="built elsewhere")
+    back = data.read_clips(path)
+    assert [c.name for c in back] == [c.name for c in clips]
+    assert [(c.style, c.content, c.take) for c in back] == [
+        (c.style, c.content, c.take) for c in clips
+    ]
+    for got, want in zip(back, clips, strict=True):
+        np.testing.assert_array_equal(got.lrot, want.lrot)
+        np.testing.assert_array_equal(got.root, want.root)
+    with pytest.raises(FileNotFoundError):
+        data.read_clips(tmp_path / "missing.npz")

@@ -1,7 +1,8 @@
 """Training of the translator on Bandai's aligned pairs (``training.translator.pairs``).
 
     python -m training.translator.fit --out checkpoints/translator.pt [--steps N]
-        [--resume] [--threads 1] [--log runs/translator]
+        [--resume] [--threads 1] [--log runs/translator] [--device cuda]
+        [--clips cache/bandai1.npz cache/bandai2.npz]
 
 Each step draws a batch of content windows and asks the restyler, given a style code,
 for the rotations of a real performance of the same action in that style, aligned in
@@ -16,6 +17,12 @@ The schedule of the shipped model is ``training/translator/schedule.json``
 (``make train-translator`` replays it). Checkpoints hold the weights, the network and
 training configuration and the feature statistics; ``--resume`` also needs the
 optimiser state, kept in ``<out>.state`` and never committed.
+
+``--device`` trains on another torch device (the weights are saved on the CPU all the
+same). ``--clips`` reads Bandai from ``training.data`` cache files instead of the data
+folder, for a machine without it; with the alignment cache
+(``$MOTION_CACHE_DIR/translator_alignments.npz``) holding every pair, such a machine needs
+no librosa either.
 """
 
 from __future__ import annotations
@@ -127,7 +134,7 @@ def hips_relative(rot: torch.Tensor, norm: dict, fk: RootLocalFK) -> torch.Tenso
     standardised output ``(B, 127, T)`` (rotations, then the hips height)."""
     raw = rot.transpose(1, 2) * norm["out_std"] + norm["out_mean"]
     r6 = raw[..., : Fe.ROTATION_CHANNELS].unflatten(-1, (-1, 6))
-    pos = fk(r6, torch.zeros(r6.shape[:2]))
+    pos = fk(r6, torch.zeros(r6.shape[:2], device=r6.device))
     return pos - pos[..., :1, :]
 
 
@@ -140,12 +147,21 @@ def held_out_take(name: str) -> bool:
 
 
 class Trainer:
-    def __init__(self, cfg: TrainConfig, net_cfg: NetworkConfig, threads: int) -> None:
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        net_cfg: NetworkConfig,
+        threads: int,
+        device: str = "cpu",
+        clips: list[D.Clip] | None = None,
+    ) -> None:
+        """``clips``: Bandai's (``D.load_bandai()`` if not given)."""
         torch.set_num_threads(threads)
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
+        self.device = torch.device(device)
         self.rng = np.random.default_rng(cfg.seed)
-        clips = D.load_bandai()
+        clips = D.load_bandai() if clips is None else clips
         self.styles = sorted({canonical_style(c.style) for c in clips})
         net_cfg.num_styles = len(self.styles)
         takes = encode_takes(clips, self.styles, cfg.views, self.rng, mirror=True)
@@ -167,12 +183,15 @@ class Trainer:
             self.pairs.alignments = load_alignments(self.alignment_cache)
             self.val_pairs.alignments = self.pairs.alignments
         self._saved_alignments = len(self.pairs.alignments)
-        self.net = Translator(net_cfg)
-        self.disc = Discriminator(net_cfg)
+        self.net = Translator(net_cfg).to(self.device)
+        self.disc = Discriminator(net_cfg).to(self.device)
         self.disc_opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.99))
-        self.fk = RootLocalFK()
+        self.fk = RootLocalFK().to(self.device)
         mean, std = self.stats.get("output")
-        self.norm = {"out_mean": torch.tensor(mean), "out_std": torch.tensor(std)}
+        self.norm = {
+            "out_mean": torch.tensor(mean, device=self.device),
+            "out_std": torch.tensor(std, device=self.device),
+        }
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
         self.step = 0
         self.stages: list[str] = []  # schedule stages the weights have finished
@@ -220,11 +239,12 @@ class Trainer:
         batch = {
             k: torch.from_numpy(np.stack(v)).transpose(1, 2).contiguous() for k, v in rows.items()
         }
-        return batch | {
+        batch |= {
             "source": torch.tensor(source),  # 0 named, 1 3D encoder, 2 2D encoder
             "labels": torch.tensor(labels),
             "real_labels": torch.tensor(real_labels),
         }
+        return {k: v.to(self.device) for k, v in batch.items()}
 
     # --- step ------------------------------------------------------------------------------
 
@@ -320,7 +340,7 @@ class Trainer:
         stats = {f"{k}_{s}": torch.tensor(getattr(self.stats, s)[k])
                  for k in self.stats.mean for s in ("mean", "std")}  # fmt: skip
         payload = {
-            "weights": self.net.state_dict(),
+            "weights": {k: v.cpu() for k, v in self.net.state_dict().items()},
             "network": self.net.cfg.to_dict(),
             "train": asdict(self.cfg),
             "styles": self.styles,
@@ -345,13 +365,13 @@ class Trainer:
         os.replace(str(path) + ".state.tmp", str(path) + ".state")
 
     def load(self, path: Path, optimiser: bool) -> None:
-        payload = torch.load(path, weights_only=False)
+        payload = torch.load(path, weights_only=False, map_location=self.device)
         self.net.load_state_dict(payload["weights"])
         self.step = int(payload["step"])
         self.stages = list(payload.get("stages", []))
         state_path = Path(str(path) + ".state")
         if optimiser:
-            state = torch.load(state_path, weights_only=False)
+            state = torch.load(state_path, weights_only=False, map_location=self.device)
             self.opt.load_state_dict(state["opt"])
             self.disc.load_state_dict(state["disc"])
             self.disc_opt.load_state_dict(state["disc_opt"])
@@ -368,13 +388,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-minutes", type=float, default=None)
     parser.add_argument("--channels", type=int, default=NetworkConfig().channels)
     parser.add_argument("--stage", help="the schedule stage this run is (recorded when done)")
+    parser.add_argument("--device", default="cpu", help="torch device to train on (cuda, ...)")
+    parser.add_argument(
+        "--clips", type=Path, nargs="+", help="Bandai from these training.data cache files"
+    )
     for name, value in asdict(TrainConfig()).items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=type(value), default=value)
     args = parser.parse_args(argv)
     cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
     if os.environ.get("MOTION_SMOKE"):
         cfg.steps, cfg.val_every = 3, 2
-    trainer = Trainer(cfg, NetworkConfig(channels=args.channels), args.threads)
+    clips = [c for p in args.clips for c in D.read_clips(p)] if args.clips else None
+    trainer = Trainer(cfg, NetworkConfig(channels=args.channels), args.threads, args.device, clips)
     if args.resume:
         trainer.load(args.out, optimiser=True)
     elif args.init:
