@@ -18,6 +18,10 @@ so a file restyled twice does not grow. Scale and morph-weight channels of that
 animation are not carried. pygltflib reads and writes the container; accessors are
 unpacked and packed here (it leaves that out). Every problem raises
 :class:`~motion.errors.MotionError` naming it.
+
+Over 600 lines in one module: writing reuses what reading found (the document's
+accessors and buffer views, the rig in the node tree, its world-aligned frames), so the
+two live beside the private helpers they share.
 """
 
 from __future__ import annotations

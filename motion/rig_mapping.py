@@ -19,6 +19,10 @@ the hand is where fingers branch. Left and right come from the facing, measured 
 feet (toes point forward) and the knees (they bend forward), then from name sides. Names
 weigh in as evidence throughout. A rig whose sides nothing tells apart is refused with
 :class:`~motion.errors.AmbiguousRigError`, which says how to pass a ``mapping``.
+
+Over 600 lines in one module: conventions, name words, the hierarchy and the geometry
+are evidence for one search over one tree (``_Tree``), and each kind of evidence is
+weighed against the others there.
 """
 
 from __future__ import annotations

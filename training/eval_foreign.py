@@ -59,6 +59,9 @@ frame count (time warping changes it), centred 3D correlation per effector, aver
 mean and the share at or above 0.85. Foot sliding as ``judges.skating``, beside real
 Bandai mocap and the content unchanged. Baseline: what the judge says of the content
 unchanged.
+
+Over 600 lines in one module: the split, the judge, the measures and the report are
+one yardstick; figures compare across sessions only while all of them change together.
 """
 
 from __future__ import annotations
