@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> dict:
     entry = {
         "name": MODEL_NAME,
         "family": "translator",
-        "version": f"0.2.{step}",
+        "version": MF.dated_version(MODEL_NAME, models_dir),
         "files": files,
         "graphs": graphs,
         "training_data": TRAINING_DATA,
