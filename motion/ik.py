@@ -534,7 +534,10 @@ def pin_canonical_feet(
         levels = dict(zip(feet, found.tolist(), strict=True))
         options["levels"] = levels
         if contacts.any():  # ground_hips, on the legs posed once for it and the pinning
-            motion, options["posed"] = _grounded(motion, contacts, levels)
+            motion, options["posed"] = _grounded(
+                motion, contacts, levels, C.INDEX["Hips"], GROUNDING_SECONDS,
+                KNEE_ABSORB * C.leg_length(), _leg_joints(CANONICAL_LEGS),
+            )  # fmt: skip
     pinned = pin_feet(
         motion, contacts[:, [0, 2]], CANONICAL_LEGS, toe_contacts=contacts[:, [1, 3]], **options
     )
@@ -547,19 +550,25 @@ def pin_canonical_feet(
 
 
 def _grounded(
-    motion: Motion, contacts: np.ndarray, levels: dict[int, float]
+    motion: Motion,
+    contacts: np.ndarray,
+    levels: dict[int, float],
+    hips: int,
+    sigma_seconds: float,
+    absorb: float,
+    joints: list[int],
 ) -> tuple[Motion, tuple[np.ndarray, np.ndarray]]:
-    """:func:`ground_hips` of a canonical ``motion`` (knees absorbing ``KNEE_ABSORB``), and
-    its legs' forward kinematics for :func:`pin_feet`: posed once, then shifted with the
-    hips (the canonical root only turns about the vertical, so a rise of the hips raises
-    every joint below them by as much)."""
-    legs = _leg_joints(CANONICAL_LEGS)
-    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=legs)
-    sigma = GROUNDING_SECONDS * motion.fps
-    shift = _grounding_shift(gpos, contacts, levels, sigma, KNEE_ABSORB * C.leg_length())
+    """:func:`ground_hips` (some frame must have a contact), and the forward kinematics of
+    ``joints`` (:func:`kinematics.fk`'s) of the grounded motion: posed once, before, then
+    shifted with the hips (their root only turns about the vertical, so a rise of the
+    hips raises every joint below them by as much)."""
+    parents = motion.skeleton.parents
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=joints)
+    shift = _grounding_shift(gpos, contacts, levels, sigma_seconds * motion.fps, absorb)
     lpos = motion.lpos.copy()
-    lpos[:, C.INDEX["Hips"], 1] += shift
-    below_hips = np.flatnonzero(K.with_ancestors(motion.skeleton.parents, legs))[1:]
+    lpos[:, hips, 1] += shift
+    posed = np.flatnonzero(K.with_ancestors(parents, joints))
+    below_hips = [j for j in posed if K.with_ancestors(parents, [j])[hips]]
     gpos[:, below_hips, 1] += shift[:, None]
     return motion.replace(lpos=lpos), (grot, gpos)
 
@@ -691,11 +700,7 @@ def ground_hips(
         )
     if not contacts.any():
         return motion
-    gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents, joints=feet)[1]
-    shift = _grounding_shift(gpos, contacts, levels, sigma_seconds * motion.fps, absorb)
-    lpos = motion.lpos.copy()
-    lpos[:, hips, 1] += shift
-    return motion.replace(lpos=lpos)
+    return _grounded(motion, contacts, levels, hips, sigma_seconds, absorb, feet)[0]
 
 
 def _grounding_shift(
