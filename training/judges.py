@@ -68,12 +68,21 @@ _BODY_MIRROR = [_MIRROR[j] - 1 for j in Fe.BODY]  # Fe.BODY is every joint but j
 
 def frame_features(motion: Motion, mirror: bool = False) -> np.ndarray:
     """``(F, 130)`` float32 per frame of a canonical 30 fps motion: root-local body joint
-    positions (leg lengths, facing frame: ``motion.features``' 3D style input), their
-    velocities, and the root channels (hips height, velocity sideways and forward,
-    turning); of its mirror image with ``mirror``."""
+    positions (leg lengths, facing frame: ``motion.features``' 3D style input, heights
+    over the clip's own floor), their velocities, and the root channels (hips height over
+    that floor, velocity sideways and forward, turning); of its mirror image with
+    ``mirror``.
+
+    The floor is the mean of the feet's ground levels (``contacts.ground_heights``), so
+    that where a clip's floor lies is not read as style: judged on heights over the
+    world's origin, real Bandai takes raised 4.8 cm kept their style 55% of the time
+    (lowered, 71%), and foreign clips' floors lie 12 cm under to 8 cm over Bandai's."""
     enc = Fe.encode(motion)
-    pos = enc.style3d.reshape(len(enc.style3d), -1, 3)
+    floor = np.float32(CT.ground_heights(enc.gpos, CT.CANONICAL_FOOT_JOINTS, Fe.LEG).mean() / Fe.LEG)
+    pos = enc.style3d.reshape(len(enc.style3d), -1, 3).copy()
+    pos[..., 1] -= floor
     root = enc.content[:, Fe.ROTATION_CHANNELS :].copy()
+    root[:, 0] -= floor
     if mirror:
         pos = pos[:, _BODY_MIRROR] * np.array([-1.0, 1.0, 1.0], dtype=np.float32)
         root[:, [1, 3]] *= -1.0  # sideways velocity, turning
