@@ -442,34 +442,65 @@ def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
         ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
 
 
-@pytest.mark.parametrize("by", [3.0, 12.0])  # cm raised by: less, more than the knees take
-def test_ground_hips_leaves_a_small_sink_to_the_knees(fixture_walk, by):
+def _dip(motion: Motion, depth: float) -> np.ndarray:
+    """A sink of ``depth`` over the middle third of ``motion``'s frames: less than half of
+    them, so the floor still lies where it did for the clip as a whole."""
+    dip = np.zeros(motion.num_frames)
+    third = motion.num_frames // 3
+    dip[third : 2 * third] = depth
+    return dip
+
+
+@pytest.mark.parametrize("by", [-3.0, 3.0, 12.0])  # cm: floating, sunk less, more than absorb
+def test_ground_hips_moves_a_whole_clip_onto_the_floor(fixture_walk, by):
+    """A clip under or over the floor throughout says where the floor lies, not how the
+    body stands: it moves whole, none of it left to the knees."""
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    hips = C.INDEX["Hips"]
+    moved = _hips_raised(fixture_walk, -by)
+    kept = ik.ground_hips(moved, contacts, levels, hips, absorb=6.0)
+    np.testing.assert_allclose(  # as from the clip itself
+        kept.lpos, ik.ground_hips(fixture_walk, contacts, levels, hips, absorb=6.0).lpos, atol=1e-6
+    )
+
+
+@pytest.mark.parametrize("by", [6.0, 30.0])  # cm: the knees take all of it, 6 cm of it
+def test_ground_hips_leaves_a_passing_sink_to_the_knees(fixture_walk, by):
     contacts = CT.canonical_foot_contacts(fixture_walk)
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
     hips, absorb = C.INDEX["Hips"], 6.0
-    sunk = _hips_raised(fixture_walk, -by)
-    settled = ik.ground_hips(sunk, contacts, levels, hips)  # raised the whole way
+    dip = _dip(fixture_walk, by)
+    sunk = _hips_raised(fixture_walk, -dip)
+    whole = ik.ground_hips(sunk, contacts, levels, hips).lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
     kept = ik.ground_hips(sunk, contacts, levels, hips, absorb=absorb)
     raised = kept.lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
-    whole = settled.lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
-    np.testing.assert_allclose(raised, np.maximum(whole - absorb, 0.0), atol=1e-9)
-    assert (raised.max() < 1e-9) if by < absorb - 2.5 else (raised.min() > by - absorb - 2.5)
-    floating = ik.ground_hips(_hips_raised(fixture_walk, by), contacts, levels, hips, absorb=absorb)
-    np.testing.assert_allclose(floating.lpos, settled.lpos, atol=1e-6)  # floating: lowered whole
+    knees = whole - raised  # what is left to the knees
+    assert knees.min() > -1e-9 and knees.max() < absorb + 1e-9
+    middle = fixture_walk.num_frames // 2
+    if by < 2 * absorb:  # the dip, smoothed over the grounding's half second, under absorb
+        assert knees[middle] > 1.5
+        assert np.ptp(raised[dip > 0]) < 1e-9  # the hips do not rise for it
+    else:
+        np.testing.assert_allclose(knees[middle], absorb, atol=1e-9)
 
 
 def test_sunk_feet_reach_the_contents_floor_with_bent_knees(fixture_walk):
-    """A restyled body a little lower than the content keeps its height: its planted feet
-    come up onto the content's floor by leg IK, the knees bending more."""
+    """A restyled body lower than the content for a while keeps its height there: its
+    planted feet come up onto the content's floor by leg IK, the knees bending more."""
     contacts = CT.canonical_foot_contacts(fixture_walk)
     knee = C.INDEX["LowerLeg_L"]
-    low = _hips_raised(fixture_walk, -0.5 * ik.KNEE_ABSORB * C.leg_length())
+    low = _hips_raised(fixture_walk, -_dip(fixture_walk, 0.5 * ik.KNEE_ABSORB * C.leg_length()))
     out = ik.pin_canonical_feet(low, contacts, floor_of=fixture_walk)
-    np.testing.assert_allclose(out.lpos, low.lpos)  # the hips stay low
+    own = ik.pin_canonical_feet(fixture_walk, contacts, floor_of=fixture_walk)
+    hips = C.INDEX["Hips"]
+    # in the dip the hips stay lower than the content's cleaned up alike
+    middle = fixture_walk.num_frames // 2
+    assert (own.lpos - out.lpos)[middle, hips, 1] > 1.5
     np.testing.assert_allclose(_foot_levels(out), _foot_levels(fixture_walk), atol=1.0)
 
-    def bend(m):  # the angle between the left thigh and shin, degrees, mean over frames
-        g = K.global_positions(m)
+    def bend(m):  # the angle between the left thigh and shin, degrees, in the dip
+        g = K.global_positions(m)[_dip(m, 1.0) > 0]
         thigh = g[:, C.INDEX["UpperLeg_L"]] - g[:, knee]
         shin = g[:, C.INDEX["Foot_L"]] - g[:, knee]
         cos = (
@@ -479,7 +510,7 @@ def test_sunk_feet_reach_the_contents_floor_with_bent_knees(fixture_walk):
         )
         return 180.0 - np.degrees(np.arccos(np.clip(cos, -1, 1))).mean()
 
-    assert bend(out) > bend(fixture_walk) + 3.0
+    assert bend(out) > bend(own) + 3.0
 
 
 def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
@@ -580,3 +611,24 @@ def test_fit_positions_on_a_skeleton_with_zero_length_bones(cmu_walk):
     assert np.abs(K.global_positions(fitted) - gpos).max() < 1e-6 * cmu_walk.skeleton.height()
     with pytest.raises(MotionError):
         fit.fit_positions(gpos[:, :-1], cmu_walk.skeleton)
+
+
+def test_pins_without_hold_height_lift_sunk_contacts_and_never_press_floating_ones(fixture_walk):
+    contacts = CT.canonical_foot_contacts(fixture_walk)
+    levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
+    legs, planted = ik.CANONICAL_LEGS, contacts[:, [0, 2]]
+    ankles = [C.INDEX["Foot_L"], C.INDEX["Foot_R"]]
+
+    def ankle_heights(m):
+        return K.global_positions(m)[:, ankles, 1][planted]
+
+    for by, moves in ((3.0, False), (-3.0, True)):  # floating: left; sunk: lifted
+        moved = _hips_raised(fixture_walk, by)
+        held = ik.pin_feet(moved, planted, legs, levels=levels)
+        kept = ik.pin_feet(moved, planted, legs, levels=levels, hold_height=False)
+        before = ankle_heights(moved).mean()
+        assert abs(ankle_heights(held).mean() - before) > 1.5  # held: brought to the floor
+        if moves:
+            assert ankle_heights(kept).mean() > before + 1.0
+        else:
+            assert ankle_heights(kept).mean() == pytest.approx(before, abs=0.3)
