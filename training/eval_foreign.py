@@ -29,7 +29,9 @@ half; nothing here reads the test half to choose anything.
 Style judge: the convolutional window classifier of ``training.judges``
 (``ConvClipClassifier``, three seeds, one thread) on every real Bandai take and its mirror
 image, with the 16 merged style names (``motion.styles``); a clip's distribution is its
-windows' mean log-probability, so top-3 is read from it. Its reference ("real clips") is
+windows' mean log-probability, so top-3 is read from it. It reads heights over each clip's
+own floor (``judges.frame_features``): where a content's floor lies, which the foot
+clean-up keeps, is not a style. Its reference ("real clips") is
 leave-action-out: five folds by action group (walks, runs, waves, raises, the rest), each
 judged by networks that never saw that group. The judge every evaluation uses is the
 committed ``training/foreign_judge.pt`` (``--pin-judge`` replaces it): trained again, on
