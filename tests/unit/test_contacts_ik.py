@@ -574,6 +574,29 @@ def test_a_swinging_foot_skimming_the_floor_is_raised_to_the_contents_clearance(
 # --------------------------------------------------------------------------- fit_positions
 
 
+@pytest.mark.parametrize("bones", [2, 3, 6])
+def test_best_rotation_of_several_bones_matches_scipy(bones):
+    """fit's closed-form best rotation against scipy's ``align_vectors``, frame by frame:
+    noisy and mirrored targets (where the best reflection is not a rotation) alike."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(bones)
+    a = rng.normal(size=(40, bones, 3))
+    turn = rot.normalize(rng.normal(size=(40, 4)))
+    b = rot.apply(turn[:, None], a) + rng.normal(0.0, 0.3, a.shape)
+    b[20:] *= np.array([-1.0, 1.0, 1.0])  # mirrored
+    q, ok = fit._kabsch(a, b)
+    assert ok.all()
+    for f in range(len(a)):
+        expected = Rotation.align_vectors(b[f], a[f])[0].as_quat()
+        assert min(np.abs(q[f] - expected).max(), np.abs(q[f] + expected).max()) < 1e-7
+    line = np.repeat(rng.normal(size=(5, 1, 3)), bones, axis=1) * np.arange(1, bones + 1)[:, None]
+    q, ok = fit._kabsch(line, line + 0.5)
+    assert not ok.any() and np.isfinite(q).all()
+    q, ok = fit._kabsch(np.zeros((3, bones, 3)), np.zeros((3, bones, 3)))
+    np.testing.assert_array_equal(q, rot.identity((3,)))
+
+
 def test_fit_positions_recovers_a_real_motion(walk):
     gpos = K.global_positions(walk)
     height = C.SKELETON.height()
