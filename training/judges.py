@@ -78,7 +78,9 @@ def frame_features(motion: Motion, mirror: bool = False) -> np.ndarray:
     world's origin, real Bandai takes raised 4.8 cm kept their style 55% of the time
     (lowered, 71%), and foreign clips' floors lie 12 cm under to 8 cm over Bandai's."""
     enc = Fe.encode(motion)
-    floor = np.float32(CT.ground_heights(enc.gpos, CT.CANONICAL_FOOT_JOINTS, Fe.LEG).mean() / Fe.LEG)
+    floor = np.float32(
+        CT.ground_heights(enc.gpos, CT.CANONICAL_FOOT_JOINTS, Fe.LEG).mean() / Fe.LEG
+    )
     pos = enc.style3d.reshape(len(enc.style3d), -1, 3).copy()
     pos[..., 1] -= floor
     root = enc.content[:, Fe.ROTATION_CHANNELS :].copy()
