@@ -248,6 +248,13 @@ class TranslatorEngine(Engine):
         self.velocity = [float(v) for v in table["velocity"]]
         self.speed = [float(v) for v in table["speed"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
+        # named codes are taken this far from "normal"'s (model_export.translator)
+        self.named_gain = float(extra.get("named_style_gain", 1.0))
+        normal = self.index.get("normal")
+        self.named_codes = self.codes.copy()
+        if normal is not None and self.named_gain != 1.0:
+            anchor = self.codes[normal]
+            self.named_codes = (anchor + self.named_gain * (self.codes - anchor)).astype(np.float32)
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
@@ -404,7 +411,8 @@ class TranslatorEngine(Engine):
         self, job: TranslatorJob, out: Networks, timer: StageTimer
     ) -> Result | StyleCodeResult:
         if job.content is None:
-            return StyleCodeResult(out.style, self.nearest(out.style.code))
+            named = out.style.source in ("style_name", "style_mix")
+            return StyleCodeResult(out.style, self.nearest(out.style.code, named=named))
         result = self._stylized(job, out, timer)
         return write_result(
             job.clip,
@@ -482,14 +490,16 @@ class TranslatorEngine(Engine):
         return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
     def code_of_name(self, name: str) -> StyleCode:
-        """The code of a named style: shipped (or another name of one), or registered
-        (``service.registered_styles``; a file read, so called in the inference pool)."""
+        """The code of a named style: shipped (or another name of one), taken the model's
+        ``named_style_gain`` from "normal"'s, or registered (``service.registered_styles``;
+        a file read, so called in the inference pool)."""
         i = self.row(name)
         if i is None:
             if (style := self.registered.lookup(name, self.name, self.version)) is not None:
                 return StyleCode(style.code.copy(), style.velocity, "style_name", speed=style.speed)
             raise self._unknown(name)
-        return StyleCode(self.codes[i].copy(), self.velocity[i], "style_name", speed=self.speed[i])
+        code = self.named_codes[i].copy()
+        return StyleCode(code, self.velocity[i], "style_name", speed=self.speed[i])
 
     def code_of_mix(self, mix: dict[str, float]) -> StyleCode:
         """Weighted mean of named codes (and of their velocity factors; geometric mean of
@@ -507,9 +517,14 @@ class TranslatorEngine(Engine):
         timer = timer or StageTimer(self.name)
         return self.predict(self._motion_job(canon, timer), timer).style
 
-    def nearest(self, code: np.ndarray, count: int = NEAREST) -> list[dict[str, Any]]:
-        """The ``count`` named styles nearest to ``code`` (Euclidean), nearest first."""
-        distances = np.linalg.norm(self.codes - np.asarray(code, dtype=np.float32), axis=1)
+    def nearest(
+        self, code: np.ndarray, count: int = NEAREST, named: bool = False
+    ) -> list[dict[str, Any]]:
+        """The ``count`` named styles nearest to ``code`` (Euclidean), nearest first: among
+        the codes the encoders learned for them (what clips and videos are compared with),
+        or with ``named`` among those their names use (:meth:`code_of_name`)."""
+        codes = self.named_codes if named else self.codes
+        distances = np.linalg.norm(codes - np.asarray(code, dtype=np.float32), axis=1)
         order = np.argsort(distances, kind="stable")[:count]
         return [
             {"style": self.style_names[i], "distance": round(float(distances[i]), 4)} for i in order

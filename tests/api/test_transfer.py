@@ -648,3 +648,20 @@ def test_too_many_frames_is_413(make_client, walk):
     client = make_client(Settings(max_frames=10))
     body = assert_problem(transfer(client, walk, style_name=STYLES[0]), 413, "too-large")
     assert body["limit"] == 10
+
+
+@needs_model
+def test_named_codes_are_taken_from_normal_by_the_models_gain(engine):
+    """A named style's code lies ``named_style_gain`` times as far from "normal"'s as the
+    learned one, on the same line; "normal" itself, and the codes clips are compared with
+    for their nearest styles, stay as learned."""
+    gain = engine.entry.extra["named_style_gain"]
+    assert gain > 1.0
+    learned = engine.codes
+    normal = learned[engine.index["normal"]]
+    for name in ("angry", "elderly", "normal"):
+        code = engine.code_of_name(name).code
+        np.testing.assert_allclose(
+            code, normal + gain * (learned[engine.index[name]] - normal), atol=1e-5
+        )
+    assert engine.nearest(learned[engine.index["angry"]])[0]["style"] == "angry"
