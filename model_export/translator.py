@@ -35,6 +35,7 @@ import torch
 
 from model_export import manifest as MF
 from motion import features as Fe
+from motion.styles import taken_from_normal
 from training.translator.networks import RESTYLER_IN, NetworkConfig, Translator
 
 OPSET = 17
@@ -295,9 +296,8 @@ def main(argv: list[str] | None = None) -> dict:
         for graph in GRAPH_NAMES
     }
     names = [str(n) for n in table["names"]]
-    learned = np.asarray(table["codes"], dtype=np.float64)
-    normal = learned[names.index("normal")] if "normal" in names else None
-    used = learned if normal is None else normal + NAMED_STYLE_GAIN * (learned - normal)
+    gain = NAMED_STYLE_GAIN if "normal" in names else 1.0
+    used = taken_from_normal(table["codes"], names, gain)
     styles = {  # "code": what the name uses (the engine's code_of_name)
         name: {
             "clips": int(table["clips"][i]),
@@ -337,7 +337,7 @@ def main(argv: list[str] | None = None) -> dict:
             "style_dim": net.cfg.style_dim,
             "network": net.cfg.to_dict(),
             "aliases": dict(payload["aliases"]),
-            "named_style_gain": NAMED_STYLE_GAIN if normal is not None else 1.0,
+            "named_style_gain": gain,
             "styles": styles,
         },
     }

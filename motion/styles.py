@@ -8,9 +8,22 @@ stands for, so evaluations score them against it and the service can list which 
 
 from __future__ import annotations
 
+import numpy as np
+
 STYLE_ALIASES: dict[str, str] = {"old": "elderly", "tired": "exhausted", "masculinity": "masculine"}
 
 
 def canonical_style(name: str) -> str:
     """The merged name of style ``name`` (itself unless it is an alias)."""
     return STYLE_ALIASES.get(name, name)
+
+
+def taken_from_normal(codes: np.ndarray, names: list[str], gain: float) -> np.ndarray:
+    """Style ``codes (S, D)`` of ``names`` taken ``gain`` times as far from "normal"'s, on
+    the line through it (float32): the codes the translator's names play. Unchanged where
+    no style is called "normal"."""
+    codes = np.asarray(codes, dtype=np.float32)
+    if "normal" not in names or gain == 1.0:
+        return codes.copy()
+    normal = codes[names.index("normal")]
+    return (normal + np.float32(gain) * (codes - normal)).astype(np.float32)

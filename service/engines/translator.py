@@ -41,6 +41,7 @@ from motion import features as Fe
 from motion import ik
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
+from motion.styles import taken_from_normal
 from service import limits
 from service.engines import register_engine
 from service.engines.base import Engine
@@ -248,13 +249,8 @@ class TranslatorEngine(Engine):
         self.velocity = [float(v) for v in table["velocity"]]
         self.speed = [float(v) for v in table["speed"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
-        # named codes are taken this far from "normal"'s (model_export.translator)
-        self.named_gain = float(extra.get("named_style_gain", 1.0))
-        normal = self.index.get("normal")
-        self.named_codes = self.codes.copy()
-        if normal is not None and self.named_gain != 1.0:
-            anchor = self.codes[normal]
-            self.named_codes = (anchor + self.named_gain * (self.codes - anchor)).astype(np.float32)
+        gain = float(extra.get("named_style_gain", 1.0))  # model_export.translator's
+        self.named_codes = taken_from_normal(self.codes, self.style_names, gain)
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
