@@ -57,7 +57,7 @@ train-translator: $(VENV)/.dev
 # projection) first when checkpoints/fast/autoencoder.pt is missing, then the style
 # networks, then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.
 # Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
-FAST_AE_ARGS ?= --steps 3600 --minutes 25
+FAST_AE_ARGS ?= --steps 3600 --stop-after 1606
 FAST_STYLE_ARGS ?=
 .PHONY: train-fast export-fast bench-fast show-styles
 train-fast: $(VENV)/.dev

@@ -1,7 +1,7 @@
 """Train the fast style networks' loss network: a 1D convolutional autoencoder over time
 (holden2017 section 3.2) on every canonical clip of the shared data.
 
-    python -m training.fast_autoencoder [--steps N] [--max-steps N] [--minutes M]
+    python -m training.fast_autoencoder [--steps N] [--stop-after N] [--max-steps N]
 
 Writes ``checkpoints/fast/stats.npz`` (feature statistics of the training split),
 ``checkpoints/fast/split.json`` (held-out Bandai takes) and
@@ -27,7 +27,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--steps", type=int, default=6000)
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many (smoke)")
-    p.add_argument("--minutes", type=float, default=None, help="stop after this wall time")
+    p.add_argument(
+        "--stop-after", type=int, default=None,
+        help="end at this step of the --steps schedule (the committed autoencoder: 1,606 of 3,600)",
+    )  # fmt: skip
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--window", type=int, default=FC.WINDOW)
     p.add_argument("--hidden", type=int, default=FC.HIDDEN)
@@ -116,12 +119,12 @@ def main(argv: list[str] | None = None) -> dict:
             rate = step / (time.time() - started)
             bar.set_postfix(mse=f"{mse_avg:.4f}", it_s=f"{rate:.2f}")
             log.scalars(step, {"train/mse": mse.item(), "train/l1": l1.item(), "it_per_s": rate})
-        out_of_time = args.minutes and (time.time() - started) / 60 > args.minutes
-        if step % args.val_every == 0 or step == steps or out_of_time:
+        stop = step == args.stop_after
+        if step % args.val_every == 0 or step == steps or stop:
             val = validate()
             log.scalars(step, {"val/mse": val})
             save(step, mse_avg, val)
-        if out_of_time:
+        if stop:
             break
     log.close()
     print(f"autoencoder: {result}")
