@@ -8,9 +8,10 @@ The paper's loss (content and Gram-matrix style terms on the loss network's hidd
 barely moved its input: on clips from outside Bandai the requested style was recognised
 about as often as chance. Here each style's network learns to do what the translator does
 for that style: its targets are the translator's outputs (strength 1, feet cleaned up, no
-time warp; ``targets``) for Bandai takes and Dance with Melody, and the loss compares the
-projected output's joint positions with the target's (relative squared error, as the
-engine decodes only the positions) and keeps bone lengths (paper eq. 8).
+time warp; ``targets``) for Bandai takes and Dance with Melody, and for each of those
+restyled once more by the translator (other manners than Bandai's actors'), and the loss
+compares the projected output's joint positions with the target's (relative squared error,
+as the engine decodes only the positions) and keeps bone lengths (paper eq. 8).
 
 Needs the loss network (``python -m training.fast_autoencoder``: ``checkpoints/fast/``)
 for the projection and the feature statistics. Writes ``checkpoints/fast/style_<name>.pt``
@@ -40,6 +41,7 @@ from training import fast_common as FC
 
 WEIGHTS = {"pos": 1.0, "bone": 100.0}
 DANCE_SECONDS = 60  # of each Dance with Melody take, in the targets
+RESTYLE_SEED = 1  # draws the style each content clip is also restyled to, in the targets
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -96,7 +98,10 @@ def targets(
     styles: list[str] | None = None,
 ) -> tuple[list[np.ndarray], dict[str, list[np.ndarray]]]:
     """Fast features of the content clips ``(F, CHANNELS)`` and, per style, of the shipped
-    translator's outputs for them, frame for frame. Cached in ``cache/`` under the
+    translator's outputs for them, frame for frame. The content is :func:`teacher_clips`,
+    then each of them restyled by the translator to one style drawn at random
+    (``RESTYLE_SEED``): other performers' manners than Bandai's actors', for networks that
+    have to restyle clips of performers they never saw. Cached in ``cache/`` under the
     translator's version and the foot clean-up's code."""
     from training import data as D
     from training.judges import load_engine
@@ -106,7 +111,8 @@ def targets(
     smoke = "_smoke" if FC.smoke() else ""
     # the targets are cleaned up feet too: a change to the clean-up makes new ones
     cleanup = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in (ik, CT)))
-    path = D.cache_dir() / f"fast_targets_{entry.version}_{cleanup.hexdigest()[:8]}{smoke}.npz"
+    key = f"{entry.version}_{cleanup.hexdigest()[:8]}_restyled{RESTYLE_SEED}{smoke}"
+    path = D.cache_dir() / f"fast_targets_{key}.npz"
     if path.exists():
         with np.load(path) as z:
             bounds = np.concatenate([[0], np.cumsum(z["lengths"])])
@@ -116,14 +122,23 @@ def targets(
                 arrays = {key: z[key] for key in ("content", *(f"style_{s}" for s in names))}
                 content = [arrays["content"][a:b] for a, b in split]
                 return content, {s: [arrays[f"style_{s}"][a:b] for a, b in split] for s in names}
-    clips = teacher_clips()
-    content = [FF.encode(c.motion).features for c in clips]
+    clips = [c.motion for c in teacher_clips()]
+    every = list(engine.style_names)
+    rng = np.random.default_rng(RESTYLE_SEED)
+    restyled = [
+        engine.transfer(
+            m, engine.code_of_name(every[int(rng.integers(len(every)))]).code, time_warp=False
+        ).motion
+        for m in tqdm(clips, desc="restyled content", mininterval=10)
+    ]
+    content_clips = clips + restyled
+    content = [FF.encode(m).features for m in content_clips]
     out: dict[str, list[np.ndarray]] = {}
-    for style in tqdm(engine.style_names, desc="translator targets", mininterval=10):
+    for style in tqdm(every, desc="translator targets", mininterval=10):
         code = engine.code_of_name(style).code
         out[style] = [
-            FF.encode(engine.transfer(c.motion, code, time_warp=False).motion).features
-            for c in clips
+            FF.encode(engine.transfer(m, code, time_warp=False).motion).features
+            for m in content_clips
         ]
     tmp = str(path) + ".tmp.npz"
     np.savez_compressed(
