@@ -111,8 +111,8 @@ def targets(
     smoke = "_smoke" if FC.smoke() else ""
     # the targets are cleaned up feet too: a change to the clean-up makes new ones
     cleanup = hashlib.sha256(b"".join(Path(m.__file__).read_bytes() for m in (ik, CT)))
-    key = f"{entry.version}_{cleanup.hexdigest()[:8]}_restyled{RESTYLE_SEED}{smoke}"
-    path = D.cache_dir() / f"fast_targets_{key}.npz"
+    tag = f"{entry.version}_{cleanup.hexdigest()[:8]}_restyled{RESTYLE_SEED}{smoke}"
+    path = D.cache_dir() / f"fast_targets_{tag}.npz"
     if path.exists():
         with np.load(path) as z:
             bounds = np.concatenate([[0], np.cumsum(z["lengths"])])
