@@ -21,13 +21,16 @@ RUN python /tmp/build/serve_requirements.py /tmp/build/pyproject.toml > /tmp/bui
  && if /opt/venv/bin/python -c "import torch" 2>/dev/null; then echo "torch in the image" >&2; exit 1; fi
 
 FROM ${PYTHON_IMAGE} AS runtime
+# The motion core's loops are compiled when the service starts (a few seconds) and kept in
+# NUMBA_CACHE_DIR, under /tmp: writable under a read-only root (deploy/k8s mounts one there).
 ENV PATH=/opt/venv/bin:$PATH \
     PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     MOTION_WORKERS=1 \
     MOTION_LOG_FORMAT=json \
     MOTION_MODELS_DIR=/app/models \
-    MOTION_STYLES_DIR=/var/lib/motion-style/styles
+    MOTION_STYLES_DIR=/var/lib/motion-style/styles \
+    NUMBA_CACHE_DIR=/tmp/numba-cache
 # Registered styles (POST /v1/styles) live in MOTION_STYLES_DIR: mount a volume there that
 # every replica shares (docker-compose.yml, deploy/k8s/styles-pvc.yaml), or they are lost
 # with the container. The folder is made here so a fresh named volume copies its owner.

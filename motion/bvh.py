@@ -8,8 +8,8 @@ replace the joint's OFFSET (what Bandai, CMU and most tools mean).
 Writing keeps names, offsets, End Sites, channel layout and frame time, so
 ``loads(dumps(m))`` reproduces ``m`` to print precision. Malformed input
 raises :class:`~motion.errors.MotionError` naming the line and the problem.
-A little over 600 lines: the number reader and writer are the service's hottest text code,
-each with a fast path and the checked one it must agree with, kept side by side.
+The numbers of the motion block are read and written by compiled loops
+(``motion.kernels``), the service's hottest text code.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from motion import rotations
+from motion import kernels, rotations
 from motion.errors import MotionError
 from motion.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skeleton
 
@@ -44,9 +44,8 @@ def load(path: str | os.PathLike) -> Motion:
 def loads(data: str | bytes) -> Motion:
     """Parse BVH text (``str`` or ``bytes``).
 
-    The hierarchy is read line by line; the motion block is read as one array
-    (``np.loadtxt``'s C reader, or the checked reader behind it), so the cost is that of
-    numpy's number parsing, not of a Python loop over frames.
+    The hierarchy is read line by line; the motion block in one compiled pass over its
+    bytes (:func:`_read_block`).
     """
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     if raw.startswith(b"\xef\xbb\xbf"):
@@ -294,151 +293,51 @@ def _parse_motion(raw: bytes, pos: int, line: int, skeleton: Skeleton) -> tuple[
 def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     """The motion block ``block`` (bytes after the ``Frame Time`` line, whose first line is
     ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
-    ``channels`` finite numbers. A well-formed block is read by :func:`_read_clean_block`;
-    any other goes through :func:`_read_checked_block`, which names the problem."""
-    values = _read_clean_block(block, channels)
-    return _read_checked_block(block, channels, first_line) if values is None else values
-
-
-def _read_clean_block(block: bytes, channels: int) -> np.ndarray | None:
-    """``block`` read by ``np.loadtxt`` (a C reader, about three times faster than
-    :func:`_read_checked_block`), or None when that reader might disagree with the checked
-    one or the block has a problem: the checked reader then reads it or names the problem.
-    Only ASCII with no control bytes but tab, CR and LF is tried, so that both split the
-    numbers at the same bytes; both read each number as correctly rounded ``float()``."""
-    if channels == 0 or not block.isascii():
-        return None
+    ``channels`` finite numbers, each read as ``float()`` reads it (``kernels.read_numbers``,
+    and ``float()`` itself for the few tokens it leaves). Any other block raises
+    :class:`MotionError` naming the line and the problem."""
     data = np.frombuffer(block, dtype=np.uint8)
-    control = data[data < 32]
-    if not ((control == 9) | (control == 10) | (control == 13)).all():
-        return None
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")  # an empty block warns
-            values = np.loadtxt(io.BytesIO(block), dtype=np.float64, comments=None, ndmin=2)
-    except (ValueError, UserWarning):
-        return None
-    if values.shape[1] != channels or not np.isfinite(values).all():
-        return None
-    if np.abs(values).max(initial=0.0) > MAX_ABS_VALUE:
-        return None
-    return values
-
-
-def _read_checked_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
-    """:func:`_read_block` with every check named. One ``np.fromstring`` reads all the
-    numbers; the count of numbers on each line is checked on the bytes (a space followed by a non-space starts
-    one), so a line with a missing value and one with an extra value cannot cancel out.
-    Plain decimals are read by :func:`_decimals`; anything it declines goes through
-    ``np.fromstring``, whose failure is then traced to its line."""
-    data = np.frombuffer(block, dtype=np.uint8)
-    space = data <= 32  # any other control byte is no number either: fromstring refuses it
-    starts = np.flatnonzero(space[:-1] > space[1:]) + 1  # a space, then a non-space
-    ends = np.flatnonzero(space[1:] > space[:-1]) + 1  # a non-space, then a space
-    if len(data) and not space[0]:
-        starts = np.concatenate(([0], starts))
-    if len(data) and not space[-1]:
-        ends = np.concatenate((ends, [len(data)]))
-    newlines = np.flatnonzero(data == 10)
-    # numbers on each line: those that start before its newline and after the previous one
-    before = np.searchsorted(starts, newlines)
-    per_line = np.diff(np.concatenate(([0], before, [len(starts)])))
-    filled = np.flatnonzero(per_line)
-    wrong = filled[per_line[filled] != channels]
-    if len(wrong):
-        i = int(wrong[0])
+    values, slow, status, line = kernels.read_numbers(data, channels)
+    if status == kernels.READ_COUNT:
+        count = len(block.split(b"\n")[line].split())
         raise MotionError(
-            f"line {first_line + i}: frame has {per_line[i]} values, the hierarchy needs "
-            f"{channels}",
-            line=first_line + i,
+            f"line {first_line + line}: frame has {count} values, the hierarchy needs {channels}",
+            line=first_line + line,
         )
-    frames = len(filled)
-    if channels == 0:  # nothing to read: a hierarchy without channels has no frames
-        return np.zeros((0, 0))
-    values = _decimals(data, block, starts, ends)
-    if values is None:
+    if status == kernels.READ_SLOW:  # many odd tokens: numpy's C reader, then float()
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
             try:
                 values = np.fromstring(block, dtype=np.float64, sep=" ")
             except (DeprecationWarning, ValueError):
-                values = None
-    if values is None or values.size != frames * channels:
-        for i in filled:
-            start = 0 if i == 0 else int(newlines[i - 1]) + 1
-            stop = int(newlines[i]) if i < len(newlines) else len(block)
-            try:
-                [float(t) for t in block[start:stop].split()]
-            except ValueError:
-                raise MotionError(
-                    f"line {first_line + i}: a value is not a number", line=first_line + i
-                ) from None
-        raise MotionError(
-            f"line {first_line}: the frames could not be read as numbers", line=first_line
-        )
-    values = values.reshape(frames, channels)
-    finite = np.isfinite(values)
-    if not finite.all():
-        i = int(filled[np.flatnonzero(~finite.all(axis=1))[0]])
-        raise MotionError(f"line {first_line + i}: a value is not finite", line=first_line + i)
-    if np.abs(values).max(initial=0.0) > MAX_ABS_VALUE:
-        i = int(filled[np.flatnonzero((np.abs(values) > MAX_ABS_VALUE).any(axis=1))[0]])
-        raise MotionError(f"line {first_line + i}: a value is absurdly large", line=first_line + i)
+                tokens = (m.span() for m in re.finditer(rb"\S+", block))
+                values = np.array([_number(block, a, b, first_line) for a, b in tokens])
+    else:
+        for a, b, index in slow:
+            values[index] = _number(block, int(a), int(b), first_line)
+    if channels == 0:  # nothing to read: a hierarchy without channels has no frames
+        return np.zeros((0, 0))
+    values = values.reshape(-1, channels)
+    bad = ~np.isfinite(values).all(axis=1)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        line = first_line + _line_of_row(block, row)
+        raise MotionError(f"line {line}: a value is not finite", line=line)
+    large = (np.abs(values) > MAX_ABS_VALUE).any(axis=1)
+    if large.any():
+        line = first_line + _line_of_row(block, int(np.flatnonzero(large)[0]))
+        raise MotionError(f"line {line}: a value is absurdly large", line=line)
     return values
 
 
-_POWERS = 10.0 ** np.arange(23)
-_MAX_DIGITS = 15  # below 2**53: a mantissa this long is an exact float
-
-
-def _decimals(
-    data: np.ndarray, block: bytes, starts: np.ndarray, ends: np.ndarray
-) -> np.ndarray | None:
-    """The numbers between ``starts`` and ``ends`` (byte offsets into ``data``, the bytes of
-    ``block``), read column by column over all of them at once: sign, digits and one point
-    give an integer mantissa M and f digits after the point, and M / 10**f is correctly
-    rounded (both exact), so each equals ``float()`` of its text. Tokens it does not read
-    (exponents, nan, more than 15 digits) are read by ``float()`` one by one while they
-    are few; None when they are many or one is no number (the caller falls back)."""
-    count = len(starts)
-    if count == 0:
-        return np.zeros(0)
-    first = data[starts]
-    negative = first == ord("-")
-    begin = starts + (negative | (first == ord("+")))
-    width = int((ends - begin).max())
-    if width > 2 * _MAX_DIGITS:
-        return None
-    padded = np.concatenate((data, np.full(width + 1, 32, np.uint8)))
-    mantissa = np.zeros(count, np.int64)
-    after_point = np.zeros(count, np.int64)
-    digits = np.zeros(count, np.int64)
-    seen_point = np.zeros(count, bool)
-    odd = np.zeros(count, bool)
-    for column in range(width):
-        at = begin + column
-        inside = at < ends
-        byte = padded.take(at)
-        value = byte - np.uint8(ord("0"))  # wraps around below "0": no digit
-        digit = (value < 10) & inside
-        point = (byte == ord(".")) & inside
-        odd |= (inside & ~(digit | point)) | (point & seen_point)
-        seen_point |= point
-        mantissa = np.where(digit, mantissa * 10 + value, mantissa)
-        after_point += digit & seen_point
-        digits += digit
-    odd |= (digits == 0) | (digits > _MAX_DIGITS)
-    out = mantissa / _POWERS[np.minimum(after_point, len(_POWERS) - 1)]
-    np.negative(out, out=out, where=negative)
-    rest = np.flatnonzero(odd)
-    if len(rest) > max(64, count // 20):
-        return None
+def _number(block: bytes, start: int, stop: int, first_line: int) -> float:
+    """``float()`` of the token ``block[start:stop]``; a MotionError naming its line when
+    it is no number."""
     try:
-        for i in rest:
-            out[i] = float(block[starts[i] : ends[i]])
+        return float(block[start:stop])
     except ValueError:
-        return None
-    return out
+        line = first_line + block.count(b"\n", 0, start)
+        raise MotionError(f"line {line}: a value is not a number", line=line) from None
 
 
 def _line_of_row(block: bytes, row: int) -> int:
@@ -545,72 +444,19 @@ def _motion_block(motion: Motion) -> str:
     return format_fixed(table[:, rows, axes])
 
 
-def _digit_words(width: int) -> np.ndarray:
-    """ASCII of ``0..10**width - 1``, zero-padded, as little-endian words (byte i, digit i)."""
-    text = [f"{n:0{width}d}".encode() for n in range(10**width)]
-    return np.array([int.from_bytes(t, "little") for t in text], dtype="<u8")
-
-
-_DIGITS4, _DIGITS3 = _digit_words(4), _digit_words(3)
-_POW10 = 10 ** np.arange(19, dtype=np.int64)
 _FIXED_LIMIT = 1e12  # beyond this (never motion) the text goes through printf
-# _KEEP[lead][first]: the bytes written of a number laid out in lead + 1 words that starts
-# at byte first, as words
-_KEEP = {
-    lead: np.array([[0] * b + [1] * (8 * lead + 8 - b) for b in range(8 * lead)], "u1").view("<u8")
-    for lead in (1, 2)
-}
-
-
-def _divide(x: np.ndarray, d: int) -> tuple[np.ndarray, np.ndarray]:
-    """``x // d, x % d`` of non-negative integers (numpy's // by a constant is many times
-    faster than its % and divmod)."""
-    q = x // d
-    return q, x - q * d
 
 
 def format_fixed(values: np.ndarray) -> str:
     """Rows of ``values (F, C)`` as text, ``%.6f`` numbers separated by spaces, one row a
-    line. Built as one byte array, not by formatting each number in Python: each number
-    is laid out as 8-byte words, its whole part right-aligned and zero-padded in the
-    leading words (digits looked up four at a time), then ``.dddddd`` and the separator,
-    and the unused leading bytes are dropped. The same text as ``np.savetxt(fmt="%.6f")``
-    but for ties at the seventh decimal and ``-0.000000``, written ``0.000000``."""
-    values = np.asarray(values, dtype=np.float64)
-    frames, channels = values.shape
+    line (``kernels.format_fixed``). The same text as ``np.savetxt(fmt="%.6f")`` but for
+    ties at the seventh decimal and ``-0.000000``, written ``0.000000``."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
     if not np.isfinite(values).all() or np.abs(values).max(initial=0.0) >= _FIXED_LIMIT:
         buf = io.StringIO()
         np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
         return buf.getvalue()
-    step = max(1, _CHUNK // max(channels, 1))  # rows at a time, as _frames_at_a_time
-    return "".join(_format_rows(values[i : i + step]) for i in range(0, max(frames, 1), step))
-
-
-def _format_rows(values: np.ndarray) -> str:
-    """:func:`format_fixed` of finite ``values`` below ``_FIXED_LIMIT``, all at once."""
-    frames, channels = values.shape
-    scaled = np.rint(values.ravel() * 1e6).astype(np.int64)
-    negative = scaled < 0
-    whole, fraction = _divide(np.abs(scaled), 1_000_000)
-    lead = 1 + len(str(int(whole.max(initial=0)))) // 8  # words for the digits and a sign
-    words = np.empty((len(scaled), lead + 1), dtype="<u8")
-    eights = [whole] if lead == 1 else _divide(whole, 100_000_000)  # eight digits a word
-    for w, eight in enumerate(eights):
-        high, low = _divide(eight, 10_000)
-        words[:, w] = _DIGITS4[high] | (_DIGITS4[low] << np.uint64(32))
-    high, low = _divide(fraction, 1000)
-    words[:, lead] = (_DIGITS3[high] << np.uint64(8)) | (_DIGITS3[low] << np.uint64(32))
-    cells = words.view(np.uint8)  # (N, 8 * lead + 8)
-    point = 8 * lead
-    cells[:, point] = ord(".")
-    cells[:, -1] = ord(" ")
-    cells.reshape(frames, channels, point + 8)[:, -1, -1] = ord("\n")
-    digits = np.searchsorted(_POW10[1:], whole, side="right") + 1
-    first = point - digits - negative  # the sign's byte, or the first digit's
-    signed = np.flatnonzero(negative)
-    cells[signed, first[signed]] = ord("-")
-    keep = _KEEP[lead].take(first, axis=0).view(bool)
-    return cells[keep].tobytes().decode("ascii")
+    return kernels.format_fixed(values).tobytes().decode("ascii")
 
 
 def save(motion: Motion, path: str | os.PathLike) -> None:

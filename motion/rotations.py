@@ -1,9 +1,10 @@
 """Quaternion helpers, numpy and ``scipy.spatial.transform.Rotation``.
 
 Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
-Products, inverses, vector rotation, Euler angles and matrices are plain broadcasting
-numpy (they run in the inner loops of forward kinematics and of BVH reading and writing,
-where scipy's per-call cost dominated); rotation vectors go through scipy.
+Products, vector rotation and norms are compiled generalised ufuncs (``motion.kernels``);
+inverses, Euler angles and matrices are plain broadcasting numpy (they run in the inner
+loops of BVH reading and writing, where scipy's per-call cost dominated); rotation vectors
+go through scipy.
 
 Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
 in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
@@ -15,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from motion import kernels
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -36,31 +39,13 @@ def normalize(q: np.ndarray) -> np.ndarray:
 
 
 def norm(v: np.ndarray) -> np.ndarray:
-    """Euclidean norms ``(...)`` of vectors ``(..., n)``: ``np.linalg.norm(v, axis=-1)``
-    at a third of its cost (einsum sums the short last axis without a temporary)."""
-    return np.sqrt(np.einsum("...i,...i->...", v, v))
-
-
-def _common_shape(a: tuple[int, ...], b: tuple[int, ...]) -> tuple[int, ...]:
-    """The broadcast shape of two shapes; equal ones (the usual case) without
-    ``np.broadcast_shapes``, a sixth of a product's cost on a short clip."""
-    return a if a == b else np.broadcast_shapes(a, b)
+    """Euclidean norms ``(...)`` of vectors ``(..., n)``."""
+    return kernels.norm(v)
 
 
 def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting ``(..., 4)``."""
-    # written out per component: forward kinematics calls this once per joint on small
-    # arrays, where np.stack's and np.cross's overhead had been most of the cost
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    out = np.empty(_common_shape(a.shape, b.shape))
-    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
-    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
-    return out
+    return kernels.quat_mul(a, b)
 
 
 def inv(q: np.ndarray) -> np.ndarray:
@@ -71,32 +56,12 @@ def inv(q: np.ndarray) -> np.ndarray:
 
 def apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` (broadcasting)."""
-    q = np.asarray(q, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
-    # v + w t + q_xyz x t with t = 2 q_xyz x v, as :func:`mul`, per component
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    out = np.empty(_common_shape(q.shape[:-1], v.shape[:-1]) + (3,))
-    out[..., 0] = vx + w * tx + (y * tz - z * ty)
-    out[..., 1] = vy + w * ty + (z * tx - x * tz)
-    out[..., 2] = vz + w * tz + (x * ty - y * tx)
-    return out
+    return kernels.quat_apply(q, v)
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross products ``(..., 3)`` of vectors ``a`` and ``b`` (broadcasting): np.cross's
-    arithmetic without its axis handling, which costs more than the products on the leg
-    IK's arrays."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(_common_shape(a.shape, b.shape))
-    out[..., 0] = ay * bz - az * by
-    out[..., 1] = az * bx - ax * bz
-    out[..., 2] = ax * by - ay * bx
-    return out
+    """Cross products ``(..., 3)`` of vectors ``a`` and ``b`` (broadcasting)."""
+    return kernels.cross(a, b)
 
 
 def between(u: np.ndarray, v: np.ndarray) -> np.ndarray:

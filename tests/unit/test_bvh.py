@@ -8,7 +8,7 @@ import tarfile
 import numpy as np
 import pytest
 
-from motion import bvh
+from motion import bvh, kernels
 from motion import rotations as rot
 from motion.errors import MotionError
 from tests import rigs
@@ -283,47 +283,49 @@ def test_matrix_to_quaternion_agrees_with_scipy_near_every_axis():
     np.testing.assert_allclose(rot.to_matrix(got), m, atol=1e-12)
 
 
-def test_decimal_reader_equals_float_of_each_token():
+def test_block_reader_equals_float_of_each_token():
     rng = np.random.default_rng(6)
     tokens = [f"{v:.6f}" for v in rng.standard_normal(3000) * rng.choice([1e-3, 1, 1e3], 3000)]
     tokens += [f"{v:g}" for v in rng.standard_normal(40) * 1e-5]  # Bandai writes 1.87007e-05
-    tokens += ["0", "-0.000000", "+3.25", "1.", ".5", "-.5", "123456789012345", "1234567890.123456789",
-               "1E3", "nan", "-inf", "007.50"]  # fmt: skip
+    tokens += ["0", "-0.000000", "+3.25", "1.", ".5", "-.5", "12345.6789012345", "123456789.123456789",
+               "1E3", "007.50", "1_0", "0.1e-22", "3e8", "12345678901234567e-30"]  # fmt: skip
     block = (" ".join(tokens) + "\n").encode()
-    data = np.frombuffer(block, dtype=np.uint8)
-    space = data <= 32
-    starts = np.concatenate(([0], np.flatnonzero(space[:-1] > space[1:]) + 1))
-    ends = np.flatnonzero(space[1:] > space[:-1]) + 1
-    got = bvh._decimals(data, block, starts, ends)
+    got = bvh._read_block(block, len(tokens), first_line=1)[0]
     want = np.array([float(t) for t in tokens])
-    np.testing.assert_array_equal(got, want)  # bit for bit, nan where nan
+    assert got.tobytes() == want.tobytes()  # bit for bit, -0.0 included
     assert np.signbit(got[tokens.index("-0.000000")])
-    bad = b"1.0 2.0 1.0.0 3.0\n"
-    data = np.frombuffer(bad, dtype=np.uint8)
-    assert bvh._decimals(data, bad, np.array([0, 4, 8, 14]), np.array([3, 7, 13, 17])) is None
+
+
+def test_block_reader_with_many_odd_tokens_equals_float():
+    """Past kernels.MAX_SLOW tokens it leaves to float(), numpy's reader reads the block."""
+    rng = np.random.default_rng(7)
+    values = rng.standard_normal((kernels.MAX_SLOW // 3 + 10, 3))
+    block = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in values).encode()
+    got = bvh._read_block(block, 3, first_line=1)
+    assert got.tobytes() == values.tobytes()
 
 
 @pytest.mark.parametrize(
-    ("block", "clean"),
+    ("block", "want"),
     [
-        (b"1.5 -0 2e-06\r\n\n\t3 +4.25 -.5 \n", True),  # CRLF, tabs, blank lines, exponents
-        (b"1.5 -0 2e-06\n3\x1c4.25 -.5\n", False),  # a control byte: the checked reader
-        (b"1.5 -0 2e-06\n3 4.25\n", False),  # a short line: the checked reader names it
-        (b"1.5 -0 nan\n3 4.25 1\n", False),
-        (b"1.5 -0 1_0\n3 4.25 1\n", False),  # float() reads 1_0, the C reader does not
-        (b"1.5 -0 2e10\n3 4.25 1\n", False),
+        # CRLF, tabs, blank lines, exponents
+        (b"1.5 -0 2e-06\r\n\n\t3 +4.25 -.5 \n", [[1.5, -0.0, 2e-06], [3, 4.25, -0.5]]),
+        # a control byte separates numbers, as white space does
+        (b"1.5 -0 2e-06\n3\x1c4.25 -.5\n", [[1.5, -0.0, 2e-06], [3, 4.25, -0.5]]),
+        (b"1.5 -0 2e-06\n3 4.25\n", "line 10: frame has 2 values, the hierarchy needs 3"),
+        (b"1.5 -0 2e-06 7\n3 4.25 1\n", "line 9: frame has 4 values, the hierarchy needs 3"),
+        (b"1.5 -0 nan\n3 4.25 1\n", "line 9: a value is not finite"),
+        (b"1.5 -0 1\n3 4.25.1 1\n", "line 10: a value is not a number"),
+        (b"1.5 -0 1_0\n3 4.25 1\n", [[1.5, -0.0, 10.0], [3, 4.25, 1]]),  # as float() reads it
+        (b"1.5 -0 1\n\n3 4.25 2e10\n", "line 11: a value is absurdly large"),
     ],
 )
-def test_clean_block_reader_agrees_with_the_checked_reader(block, clean):
-    def read(reader):
-        try:
-            return reader(block, 3, first_line=9)
-        except MotionError as e:
-            return str(e)
-
-    assert (bvh._read_clean_block(block, 3) is not None) == clean
-    got, want = read(bvh._read_block), read(bvh._read_checked_block)
+def test_block_reader_reads_or_names_the_line(block, want):
+    try:
+        got = bvh._read_block(block, 3, first_line=9)
+    except MotionError as e:
+        got = str(e)
     if isinstance(want, str):
         assert got == want
     else:
-        assert got.tobytes() == want.tobytes()  # bit for bit, -0.0 included
+        assert got.tobytes() == np.array(want, dtype=np.float64).tobytes()
