@@ -32,7 +32,6 @@ _FRAME_TIME_RE = re.compile(r"^frame\s+time\s*:?\s*(\S+)$", re.IGNORECASE)
 MAX_ABS_VALUE = 1e9  # offsets and channel values beyond this are damage, not motion
 _MIN_FRAME_TIME = 1e-4  # 10,000 fps: no capture system records faster
 _MAX_DEPTH = 256  # real rigs nest < 100 deep; deeper would overflow recursive writers
-_CHUNK = 16_384  # numbers converted or formatted at a time (see _frames_at_a_time)
 
 
 def load(path: str | os.PathLike) -> Motion:
@@ -374,20 +373,9 @@ def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
     orders: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
         orders.setdefault(skeleton.rotation_order(j), []).append(j)
-    step = _frames_at_a_time(skeleton.num_joints)
     for order, joints in orders.items():
-        for start in range(0, frames, step):  # see _frames_at_a_time
-            part = slice(start, start + step)
-            lrot[part, joints] = rotations.from_euler(euler[part, joints], order)
+        lrot[:, joints] = rotations.from_euler(euler[:, joints], order)
     return Motion(skeleton, fps, lrot, lpos)
-
-
-def _frames_at_a_time(joints: int) -> int:
-    """Frames of ``joints`` joints converted at a time: a few thousand rotations, so the
-    temporaries stay in cache and in memory already mapped (freeing a large one hands
-    its pages back, and the next one faults them in again): from_euler of 3,840 frames
-    of 22 joints in 6.6 ms instead of 12.7."""
-    return max(1, _CHUNK // (4 * max(joints, 1)))
 
 
 def _fmt(v: np.ndarray | list[float]) -> str:

@@ -18,6 +18,7 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from motion import canonical as C
 from motion import contacts as CT
+from motion import kernels
 from motion import kinematics as K
 from motion import rotations as rot
 from motion.errors import MotionError
@@ -118,51 +119,22 @@ def two_bone_ik(
     leg to ``1 - eps`` of full extension (or leave it as straight as it already is);
     targets too close bend it to ``|thigh - shin| + eps * (thigh + shin)`` from the hip.
     """
-    hip, knee, ankle, target = np.broadcast_arrays(
-        *(np.asarray(x, dtype=np.float64) for x in (hip, knee, ankle, target))
+    hinted = pole is not None
+    arrays = np.broadcast_arrays(
+        *(
+            np.asarray(x, dtype=np.float64)
+            for x in (hip, knee, ankle, target, pole if hinted else hip)
+        )
     )
-    thigh = knee - hip
-    shin = ankle - knee
-    thigh_len = rot.norm(thigh)[..., None]
-    shin_len = rot.norm(shin)[..., None]
-    full = thigh_len + shin_len
-    reach_now = ankle - hip
-    dist_now = rot.norm(reach_now)[..., None]
-    line_old = _unit(reach_now, _unit(thigh, np.array([0.0, -1.0, 0.0])))
-    to_target = target - hip
-    line_new = _unit(to_target, line_old)
-
-    # clamp the hip-target distance into what the two bones can span, without
-    # bending a leg that is already straighter (or more folded) than the limits
-    longest = np.minimum(full, np.maximum((1.0 - eps) * full, dist_now))
-    folded = np.abs(thigh_len - shin_len)
-    shortest = np.maximum(folded, np.minimum(folded + eps * full, dist_now))
-    dist = np.clip(rot.norm(to_target)[..., None], shortest, longest)
-
-    # bend direction: the knee's offset from the hip-ankle line, steered by the pole
-    # only when the leg is straight
-    bend_now = (thigh - _dot(thigh, line_old) * line_old) / np.maximum(thigh_len, 1e-12)
-    hint = _perpendicular(line_old, None if pole is None else np.asarray(pole, dtype=np.float64))
-    straightness = np.maximum(POLE_WEIGHT - rot.norm(bend_now)[..., None], 0.0)
-    bend_old = _unit(bend_now + straightness * hint, hint)
-    bend_new = rot.apply(rot.between(line_old, line_new), bend_old)
-    bend_new = _unit(bend_new - _dot(bend_new, line_new) * line_new, _perpendicular(line_new))
-
-    cos_hip = (thigh_len**2 + dist**2 - shin_len**2) / np.maximum(2.0 * thigh_len * dist, 1e-12)
-    cos_hip = np.clip(cos_hip, -1.0, 1.0)
-    sin_hip = np.sqrt(1.0 - cos_hip**2)
-    thigh_new = thigh_len * (cos_hip * line_new + sin_hip * bend_new)
-    shin_new = dist * line_new - thigh_new
-
-    # the thigh keeps its twist relative to the bend plane, so the knee still bends
-    # about its own hinge
-    hip_turn = _frame_rotation(
-        thigh, rot.cross(line_old, bend_old), thigh_new, rot.cross(line_new, bend_new)
+    shape = arrays[0].shape[:-1]
+    flat = [np.ascontiguousarray(x.reshape(-1, 3)) for x in arrays]
+    hip_turn, knee_turn, knee_new, ankle_new = kernels.two_bone_ik(*flat, hinted, eps, POLE_WEIGHT)
+    return LegSolution(
+        hip_turn.reshape(shape + (4,)),
+        knee_turn.reshape(shape + (4,)),
+        knee_new.reshape(shape + (3,)),
+        ankle_new.reshape(shape + (3,)),
     )
-    knee_turn = rot.between(rot.apply(hip_turn, shin), shin_new)
-    knee_new = hip + rot.apply(hip_turn, thigh)
-    ankle_new = knee_new + rot.apply(rot.mul(knee_turn, hip_turn), shin)
-    return LegSolution(hip_turn, knee_turn, knee_new, ankle_new)
 
 
 # --------------------------------------------------------------------------- feet

@@ -259,6 +259,279 @@ def cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no 
     out[2] = ax * by - ay * bx
 
 
+# Rotation conversions, each the arithmetic of the numpy version it replaced in the same
+# order (sums of squares as numpy's einsum adds them), so they give the same bits.
+
+_DEGREE = np.pi / 180.0
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _shepperd(m00, m01, m02, m10, m11, m12, m20, m21, m22, out, n):  # pragma: no cover
+    """``out[n]``: the unit quaternion of a rotation matrix by Shepperd's method, from its
+    largest of w, x, y, z (no division by a small number)."""
+    t0, t1, t2 = m21 - m12, m02 - m20, m10 - m01
+    t3, t4, t5 = m01 + m10, m02 + m20, m12 + m21
+    plus, minus = 1 + m00, 1 - m00
+    w2, x2, y2 = (plus + m11) + m22, (plus - m11) - m22, (minus + m11) - m22
+    z2 = (minus - m11) + m22
+    if max(y2, z2) > max(w2, x2):
+        q = (t4, t5, z2, t2) if z2 > y2 else (t3, y2, t5, t1)
+    else:
+        q = (x2, t3, t4, t0) if x2 > w2 else (t0, t1, t2, w2)
+    out[n, 0], out[n, 1], out[n, 2], out[n, 3] = q
+    scale = np.sqrt(
+        (out[n, 0] * out[n, 0] + out[n, 2] * out[n, 2])
+        + (out[n, 1] * out[n, 1] + out[n, 3] * out[n, 3])
+    )
+    for c in range(4):
+        out[n, c] /= scale
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """Quaternions ``(N, 4)`` of matrices ``(N, 3, 3)`` (nearly orthonormal)."""
+    out = np.empty((m.shape[0], 4))
+    for n in range(m.shape[0]):
+        _shepperd(m[n, 0, 0], m[n, 0, 1], m[n, 0, 2], m[n, 1, 0], m[n, 1, 1], m[n, 1, 2],
+                  m[n, 2, 0], m[n, 2, 1], m[n, 2, 2], out, n)  # fmt: skip
+    return out
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def from_6d(r6: np.ndarray) -> np.ndarray:
+    """Quaternions ``(N, 4)`` of 6D rotations ``(N, 6)`` (two matrix columns, made
+    orthonormal by Gram-Schmidt)."""
+    out = np.empty((r6.shape[0], 4))
+    for n in range(r6.shape[0]):
+        a0, a1, a2, b0, b1, b2 = r6[n, 0], r6[n, 1], r6[n, 2], r6[n, 3], r6[n, 4], r6[n, 5]
+        size = max(np.sqrt((a0 * a0 + a2 * a2) + a1 * a1), 1e-12)
+        x0, x1, x2 = a0 / size, a1 / size, a2 / size
+        along = (x0 * b0 + x2 * b2) + x1 * b1
+        b0, b1, b2 = b0 - along * x0, b1 - along * x1, b2 - along * x2
+        size = max(np.sqrt((b0 * b0 + b2 * b2) + b1 * b1), 1e-12)
+        y0, y1, y2 = b0 / size, b1 / size, b2 / size
+        z0, z1, z2 = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0
+        _shepperd(x0, y0, z0, x1, y1, z1, x2, y2, z2, out, n)
+    return out
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def from_euler(e: np.ndarray, i: int, j: int, k: int, degrees: bool) -> np.ndarray:
+    """Quaternions ``(N, 4)`` of intrinsic Euler angles ``(N, 3)`` about axes ``i, j, k``
+    (R = Ri(a) Rj(b) Rk(c)): the product of the three axis quaternions, written out."""
+    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
+    out = np.empty((e.shape[0], 4))
+    for n in range(e.shape[0]):
+        if degrees:
+            ha, hb, hc = e[n, 0] * _DEGREE * 0.5, e[n, 1] * _DEGREE * 0.5, e[n, 2] * _DEGREE * 0.5
+        else:
+            ha, hb, hc = e[n, 0] * 0.5, e[n, 1] * 0.5, e[n, 2] * 0.5
+        ca, cb, cc = np.cos(ha), np.cos(hb), np.cos(hc)
+        sa, sb, sc = np.sin(ha), np.sin(hb), np.sin(hc)
+        cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+        out[n, i] = sacb * cc + p * casb * sc
+        out[n, j] = casb * cc - p * sacb * sc
+        out[n, k] = cacb * sc + p * sasb * cc
+        out[n, 3] = cacb * cc - p * sasb * sc
+    return out
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(N, 3, 3)`` of quaternions ``(N, 4)``, normalised first (a zero
+    quaternion as the identity)."""
+    out = np.empty((q.shape[0], 3, 3))
+    for n in range(q.shape[0]):
+        x, y, z, w = q[n, 0], q[n, 1], q[n, 2], q[n, 3]
+        size = np.sqrt((x * x + z * z) + (y * y + w * w))
+        if size > 1e-12:
+            x, y, z, w = x / size, y / size, z / size, w / size
+        else:
+            x, y, z, w = 0.0, 0.0, 0.0, 1.0
+        out[n, 0, 0] = 1 - 2 * (y * y + z * z)
+        out[n, 0, 1] = 2 * (x * y - z * w)
+        out[n, 0, 2] = 2 * (x * z + y * w)
+        out[n, 1, 0] = 2 * (x * y + z * w)
+        out[n, 1, 1] = 1 - 2 * (x * x + z * z)
+        out[n, 1, 2] = 2 * (y * z - x * w)
+        out[n, 2, 0] = 2 * (x * z - y * w)
+        out[n, 2, 1] = 2 * (y * z + x * w)
+        out[n, 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
+
+
+# Two-bone leg IK (``motion.ik.two_bone_ik``), frame by frame on 3-vectors held in locals.
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _dot3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
+    return (a0 * b0 + a2 * b2) + a1 * b1  # as numpy's einsum adds them
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _unit3(v0, v1, v2, f0, f1, f2, fallback):  # pragma: no cover
+    """``v`` made unit, or ``f`` (with ``fallback``) where ``v`` is about zero."""
+    size = np.sqrt(_dot3(v0, v1, v2, v0, v1, v2))
+    if fallback and not size > 1e-12:
+        return f0, f1, f2
+    size = max(size, 1e-12)
+    return v0 / size, v1 / size, v2 / size
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _perpendicular3(v0, v1, v2, h0, h1, h2, hinted):  # pragma: no cover
+    """A unit vector perpendicular to unit ``v``: ``h``'s perpendicular part where
+    ``hinted`` and it has one, else a fixed choice."""
+    s0, s1, s2 = (1.0, 0.0, 0.0) if abs(v0) < 0.9 else (0.0, 0.0, 1.0)
+    along = _dot3(s0, s1, s2, v0, v1, v2)
+    o0, o1, o2 = _unit3(s0 - along * v0, s1 - along * v1, s2 - along * v2, 0.0, 0.0, 0.0, False)
+    if hinted:
+        along = _dot3(h0, h1, h2, v0, v1, v2)
+        p0, p1, p2 = h0 - along * v0, h1 - along * v1, h2 - along * v2
+        hint = max(np.sqrt(_dot3(h0, h1, h2, h0, h1, h2)), 1e-300)
+        if np.sqrt(_dot3(p0, p1, p2, p0, p1, p2)) > 1e-9 * hint:
+            return _unit3(p0, p1, p2, 0.0, 0.0, 0.0, False)
+    return o0, o1, o2
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _cross3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _between3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
+    """``motion.rotations.between`` of one pair: the shortest arc from ``u`` onto ``v``."""
+    u0, u1, u2 = _unit3(u0, u1, u2, 0.0, 0.0, 0.0, False)
+    v0, v1, v2 = _unit3(v0, v1, v2, 0.0, 0.0, 0.0, False)
+    w = 1.0 + ((u0 * v0 + u1 * v1) + u2 * v2)
+    x, y, z = _cross3(u0, u1, u2, v0, v1, v2)
+    if w < 1e-9:  # opposite: any axis perpendicular to u
+        x, y, z = _cross3(u0, u1, u2, 1.0, 0.0, 0.0)
+        if np.sqrt(_dot3(x, y, z, x, y, z)) < 1e-6:
+            x, y, z = _cross3(u0, u1, u2, 0.0, 1.0, 0.0)
+        w = 0.0
+    size = np.sqrt((x * x + z * z) + (y * y + w * w))
+    return x / size, y / size, z / size, w / size
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _apply3(x, y, z, w, v0, v1, v2):  # pragma: no cover
+    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
+    return (
+        v0 + w * t0 + (y * t2 - z * t1),
+        v1 + w * t1 + (z * t0 - x * t2),
+        v2 + w * t2 + (x * t1 - y * t0),
+    )
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def two_bone_ik(hip, knee, ankle, target, pole, hinted, eps, pole_weight):  # pragma: no cover
+    """``motion.ik.two_bone_ik`` on ``(N, 3)`` arrays (``pole`` read where ``hinted``):
+    hip turns ``(N, 4)``, knee turns ``(N, 4)``, new knees and ankles ``(N, 3)``."""
+    count = hip.shape[0]
+    hip_turn, knee_turn = np.empty((count, 4)), np.empty((count, 4))
+    knee_new, ankle_new = np.empty((count, 3)), np.empty((count, 3))
+    frame = np.empty((2, 3, 3))
+    for n in range(count):
+        h0, h1, h2 = hip[n, 0], hip[n, 1], hip[n, 2]
+        th0, th1, th2 = knee[n, 0] - h0, knee[n, 1] - h1, knee[n, 2] - h2
+        sh0, sh1, sh2 = ankle[n, 0] - knee[n, 0], ankle[n, 1] - knee[n, 1], ankle[n, 2] - knee[n, 2]
+        thigh_len = np.sqrt(_dot3(th0, th1, th2, th0, th1, th2))
+        shin_len = np.sqrt(_dot3(sh0, sh1, sh2, sh0, sh1, sh2))
+        full = thigh_len + shin_len
+        r0, r1, r2 = ankle[n, 0] - h0, ankle[n, 1] - h1, ankle[n, 2] - h2
+        dist_now = np.sqrt(_dot3(r0, r1, r2, r0, r1, r2))
+        f0, f1, f2 = _unit3(th0, th1, th2, 0.0, -1.0, 0.0, True)
+        lo0, lo1, lo2 = _unit3(r0, r1, r2, f0, f1, f2, True)
+        g0, g1, g2 = target[n, 0] - h0, target[n, 1] - h1, target[n, 2] - h2
+        ln0, ln1, ln2 = _unit3(g0, g1, g2, lo0, lo1, lo2, True)
+        longest = min(full, max((1.0 - eps) * full, dist_now))
+        folded = abs(thigh_len - shin_len)
+        shortest = max(folded, min(folded + eps * full, dist_now))
+        dist = min(max(np.sqrt(_dot3(g0, g1, g2, g0, g1, g2)), shortest), longest)
+        along = _dot3(th0, th1, th2, lo0, lo1, lo2)
+        scale = max(thigh_len, 1e-12)
+        b0, b1, b2 = (
+            (th0 - along * lo0) / scale,
+            (th1 - along * lo1) / scale,
+            (th2 - along * lo2) / scale,
+        )
+        i0, i1, i2 = _perpendicular3(lo0, lo1, lo2, pole[n, 0], pole[n, 1], pole[n, 2], hinted)
+        straight = max(pole_weight - np.sqrt(_dot3(b0, b1, b2, b0, b1, b2)), 0.0)
+        bo0, bo1, bo2 = _unit3(
+            b0 + straight * i0, b1 + straight * i1, b2 + straight * i2, i0, i1, i2, True
+        )
+        qx, qy, qz, qw = _between3(lo0, lo1, lo2, ln0, ln1, ln2)
+        bn0, bn1, bn2 = _apply3(qx, qy, qz, qw, bo0, bo1, bo2)
+        along = _dot3(bn0, bn1, bn2, ln0, ln1, ln2)
+        p0, p1, p2 = _perpendicular3(ln0, ln1, ln2, 0.0, 0.0, 0.0, False)
+        bn0, bn1, bn2 = _unit3(
+            bn0 - along * ln0, bn1 - along * ln1, bn2 - along * ln2, p0, p1, p2, True
+        )
+        cos_hip = (thigh_len * thigh_len + dist * dist - shin_len * shin_len) / max(
+            2.0 * thigh_len * dist, 1e-12
+        )
+        cos_hip = min(max(cos_hip, -1.0), 1.0)
+        sin_hip = np.sqrt(1.0 - cos_hip * cos_hip)
+        tn0 = thigh_len * (cos_hip * ln0 + sin_hip * bn0)
+        tn1 = thigh_len * (cos_hip * ln1 + sin_hip * bn1)
+        tn2 = thigh_len * (cos_hip * ln2 + sin_hip * bn2)
+        sn0, sn1, sn2 = dist * ln0 - tn0, dist * ln1 - tn1, dist * ln2 - tn2
+        # the hip's turn: the frame (thigh, its normal to the bend plane) onto the new one
+        for which in range(2):
+            if which == 0:
+                u0, u1, u2 = tn0, tn1, tn2
+                m0, m1, m2 = _cross3(ln0, ln1, ln2, bn0, bn1, bn2)
+            else:
+                u0, u1, u2 = th0, th1, th2
+                m0, m1, m2 = _cross3(lo0, lo1, lo2, bo0, bo1, bo2)
+            x0, x1, x2 = _unit3(u0, u1, u2, 0.0, 0.0, 0.0, False)
+            p0, p1, p2 = _perpendicular3(x0, x1, x2, 0.0, 0.0, 0.0, False)
+            along = _dot3(m0, m1, m2, x0, x1, x2)
+            y0, y1, y2 = _unit3(m0 - along * x0, m1 - along * x1, m2 - along * x2, p0, p1, p2, True)
+            z0, z1, z2 = _cross3(x0, x1, x2, y0, y1, y2)
+            frame[which, 0, 0], frame[which, 0, 1], frame[which, 0, 2] = x0, y0, z0
+            frame[which, 1, 0], frame[which, 1, 1], frame[which, 1, 2] = x1, y1, z1
+            frame[which, 2, 0], frame[which, 2, 1], frame[which, 2, 2] = x2, y2, z2
+        m = np.empty((3, 3))
+        for r in range(3):
+            for c in range(3):
+                m[r, c] = (
+                    frame[0, r, 0] * frame[1, c, 0] + frame[0, r, 1] * frame[1, c, 1]
+                ) + frame[0, r, 2] * frame[1, c, 2]
+        _shepperd(
+            m[0, 0],
+            m[0, 1],
+            m[0, 2],
+            m[1, 0],
+            m[1, 1],
+            m[1, 2],
+            m[2, 0],
+            m[2, 1],
+            m[2, 2],
+            hip_turn,
+            n,
+        )
+        hx, hy, hz, hw = hip_turn[n, 0], hip_turn[n, 1], hip_turn[n, 2], hip_turn[n, 3]
+        s0, s1, s2 = _apply3(hx, hy, hz, hw, sh0, sh1, sh2)
+        kx, ky, kz, kw = _between3(s0, s1, s2, sn0, sn1, sn2)
+        knee_turn[n, 0], knee_turn[n, 1], knee_turn[n, 2], knee_turn[n, 3] = kx, ky, kz, kw
+        k0, k1, k2 = _apply3(hx, hy, hz, hw, th0, th1, th2)
+        knee_new[n, 0], knee_new[n, 1], knee_new[n, 2] = h0 + k0, h1 + k1, h2 + k2
+        cx = kw * hx + kx * hw + ky * hz - kz * hy
+        cy = kw * hy - kx * hz + ky * hw + kz * hx
+        cz = kw * hz + kx * hy - ky * hx + kz * hw
+        cw = kw * hw - kx * hx - ky * hy - kz * hz
+        a0, a1, a2 = _apply3(cx, cy, cz, cw, sh0, sh1, sh2)
+        ankle_new[n, 0], ankle_new[n, 1], ankle_new[n, 2] = (
+            knee_new[n, 0] + a0,
+            knee_new[n, 1] + a1,
+            knee_new[n, 2] + a2,
+        )
+    return hip_turn, knee_turn, knee_new, ankle_new
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -270,4 +543,9 @@ def warm() -> None:
     cross(v, v)
     fk(q[None], v[None], np.zeros(1, np.int64), np.ones(1, np.bool_))
     format_fixed(v)
+    from_euler(v, 2, 0, 1, True)
+    from_6d(np.zeros((1, 6)))
+    from_matrix(np.eye(3)[None])
+    to_matrix(q)
+    two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)

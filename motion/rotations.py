@@ -138,24 +138,12 @@ def from_euler(e: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Quaternions ``(..., 4)`` from Euler angles ``(..., 3)`` listed in ``order``.
 
     ``order`` is the BVH channel order, e.g. ``"ZXY"``: angles ``e[..., 0]`` about Z,
-    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry. Plain numpy (the
-    product of three axis quaternions): BVH reading converts every joint of every frame.
+    ``e[..., 1]`` about X, ``e[..., 2]`` about Y, and R = Rz @ Rx @ Ry (compiled: BVH
+    reading converts every joint of every frame).
     """
     e = np.asarray(e, dtype=np.float64)
-    half = (np.deg2rad(e) if degrees else e) * 0.5
-    c, s = np.cos(half), np.sin(half)
-    ca, cb, cc = c[..., 0], c[..., 1], c[..., 2]
-    sa, sb, sc = s[..., 0], s[..., 1], s[..., 2]
-    i, j, k = _axes(order)
-    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
-    # the product (sa e_i, ca)(sb e_j, cb)(sc e_k, cc), written out
-    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
-    out = np.empty(e.shape[:-1] + (4,))
-    out[..., i] = sacb * cc + p * casb * sc
-    out[..., j] = casb * cc - p * sacb * sc
-    out[..., k] = cacb * sc + p * sasb * cc
-    out[..., 3] = cacb * cc - p * sasb * sc
-    return out
+    flat = np.ascontiguousarray(e.reshape(-1, 3))
+    return kernels.from_euler(flat, *_axes(order), degrees).reshape(e.shape[:-1] + (4,))
 
 
 def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
@@ -184,65 +172,18 @@ def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` (normalised first)."""
-    q = normalize(q)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    q = np.asarray(q, dtype=np.float64)
+    flat = np.ascontiguousarray(q.reshape(-1, 4))
+    return kernels.to_matrix(flat).reshape(q.shape[:-1] + (3, 3))
 
 
 def from_matrix(m: np.ndarray) -> np.ndarray:
     """Quaternions ``(..., 4)`` from (nearly) orthonormal matrices ``(..., 3, 3)``: Shepperd's
-    method in numpy (each from its largest of w, x, y, z, so no division by a small number);
+    method (each from its largest of w, x, y, z, so no division by a small number);
     a matrix that is not quite orthonormal gives the normalised nearest quaternion."""
     m = np.asarray(m, dtype=np.float64)
-    return _from_entries(*(m[..., i, j] for i in range(3) for j in range(3)))
-
-
-# Shepperd's four formulas: for each largest square (w, x, y, z), the terms 4 q_i q_k it
-# takes component i from, as rows of _TERMS (wx, wy, wz, xy, xz, yz, w2, x2, y2, z2)
-_SHEPPERD = np.array([[0, 1, 2, 6], [7, 3, 4, 0], [3, 8, 5, 1], [4, 5, 9, 2]])
-
-
-def _from_entries(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> np.ndarray:
-    """:func:`from_matrix` of the matrices whose entries are given as arrays ``(...)``:
-    the ten terms computed once, each quaternion gathered from them (one ``take``, not a
-    ``(..., 4, 4)`` table of candidates)."""
-    shape = np.shape(m00)
-    terms = np.empty((10,) + shape)
-    flat = terms.reshape(10, -1)
-    m00, m01, m02, m10, m11, m12, m20, m21, m22 = (
-        np.asarray(e, dtype=np.float64).reshape(-1)
-        for e in (m00, m01, m02, m10, m11, m12, m20, m21, m22)
-    )
-    np.subtract(m21, m12, out=flat[0])
-    np.subtract(m02, m20, out=flat[1])
-    np.subtract(m10, m01, out=flat[2])
-    np.add(m01, m10, out=flat[3])
-    np.add(m02, m20, out=flat[4])
-    np.add(m12, m21, out=flat[5])
-    # 4 w^2, 4 x^2, 4 y^2, 4 z^2 (times the same scale); the largest picks the formula
-    plus, minus = 1 + m00, 1 - m00
-    np.add(plus + m11, m22, out=flat[6])
-    np.subtract(plus - m11, m22, out=flat[7])
-    np.subtract(minus + m11, m22, out=flat[8])
-    np.add(minus - m11, m22, out=flat[9])
-    w2, x2, y2, z2 = flat[6:]
-    # np.argmax over the four, first of equals, without its slow short-axis reduction
-    best = np.where(
-        np.maximum(y2, z2) > np.maximum(w2, x2), 2 + (z2 > y2), (x2 > w2).astype(np.intp)
-    )
-    count = len(best)
-    q = flat.take(_SHEPPERD[best] * count + np.arange(count)[:, None])
-    return (q / norm(q)[:, None]).reshape(shape + (4,))
+    flat = np.ascontiguousarray(m.reshape(-1, 3, 3))
+    return kernels.from_matrix(flat).reshape(m.shape[:-2] + (4,))
 
 
 def to_6d(q: np.ndarray) -> np.ndarray:
@@ -254,15 +195,8 @@ def to_6d(q: np.ndarray) -> np.ndarray:
 def from_6d(r6: np.ndarray) -> np.ndarray:
     """Quaternions from 6D ``(..., 6)`` by Gram-Schmidt (inverse of :func:`to_6d`)."""
     r6 = np.asarray(r6, dtype=np.float64)
-    a, b = r6[..., :3], r6[..., 3:]
-    x = a / np.maximum(norm(a), 1e-12)[..., None]
-    b = b - np.einsum("...i,...i->...", x, b)[..., None] * x
-    y = b / np.maximum(norm(b), 1e-12)[..., None]
-    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
-    y0, y1, y2 = y[..., 0], y[..., 1], y[..., 2]
-    z0, z1, z2 = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0  # x cross y
-    # the matrix has columns x, y, z
-    return _from_entries(x0, y0, z0, x1, y1, z1, x2, y2, z2)
+    flat = np.ascontiguousarray(r6.reshape(-1, 6))
+    return kernels.from_6d(flat).reshape(r6.shape[:-1] + (4,))
 
 
 def to_rotvec(q: np.ndarray) -> np.ndarray:
