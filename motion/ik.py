@@ -176,61 +176,18 @@ def _pin_offsets(
     displacement stays continuous as the anchor moves. Around the contacts it ramps
     in and out over ``blend`` frames.
     """
-    frames = len(ankle)
-    roll = np.zeros(frames)  # 0: anchor at the ankle, 1: at the toe
-    contact = ankle_contact.copy()
-    if toe is not None and toe_contact is not None:
-        contact |= toe_contact
-        roll[toe_contact & ~ankle_contact] = 1.0
-        for start, stop in _runs(toe_contact & ankle_contact):
-            # from the heel, or from the toe if only the toe touched before; to the toe,
-            # or back to the heel if only the heel touches after
-            first = 1.0 if start > 0 and roll[start - 1] == 1.0 else 0.0
-            last = 0.0 if stop < frames and contact[stop] and roll[stop] == 0.0 else 1.0
-            t = np.arange(1, stop - start + 1) / (stop - start + 1)
-            roll[start:stop] = first + (last - first) * t
-    else:
-        toe = ankle
-    r = roll[:, None]
-    anchor = ankle + r * (toe - ankle)
-    ground = ankle_ground + roll * (toe_ground - ankle_ground)
-    # the displacement of the same point of the foot between frames, so a moving
-    # anchor does not jump
-    step = np.zeros((frames, 3))
-    step[1:] = anchor[1:] - (ankle[:-1] + r[1:] * (toe[:-1] - ankle[:-1]))
-
-    offsets = np.zeros((frames, 3))
-    runs = _runs(contact)
-    for start, stop in runs:
-        drift = np.cumsum(step[start:stop], axis=0)
-        drift -= drift[0]
-        held = anchor[start:stop] - drift  # where the anchor is with its slide removed
-        shift = -drift
-        shift[:, [0, 2]] += drift[:, [0, 2]].mean(axis=0)
-        shift[:, 1] += np.mean(ground[start:stop] - held[:, 1])
-        offsets[start:stop] = shift
-
-    # ramps in the gaps: towards zero for long gaps, straight across short ones
-    if blend > 0:
-        bounds = [(-1, None)] + runs + [(frames, None)]
-        for (_, prev_stop), (next_start, _) in zip(bounds[:-1], bounds[1:], strict=False):
-            gap_start = 0 if prev_stop is None else prev_stop
-            gap = next_start - gap_start
-            if gap <= 0:
-                continue
-            left = offsets[prev_stop - 1] if prev_stop is not None else np.zeros(3)
-            right = offsets[next_start] if next_start < frames else np.zeros(3)
-            t = np.arange(1, gap + 1, dtype=np.float64)[:, None]
-            if prev_stop is not None and next_start < frames and gap <= 2 * blend:
-                w = _smoothstep(t / (gap + 1))
-                offsets[gap_start:next_start] = (1.0 - w) * left + w * right
-            else:
-                fade_out = 1.0 - _smoothstep(t / (blend + 1))
-                fade_in = _smoothstep((t - gap - 1 + blend + 1) / (blend + 1))
-                offsets[gap_start:next_start] = fade_out * left + fade_in * right
-    if not hold_height:
-        offsets[:, 1] = np.maximum(offsets[:, 1], 0.0)
-    return offsets
+    if toe is None or toe_contact is None:
+        toe, toe_contact = ankle, np.zeros(len(ankle), dtype=bool)
+    return kernels.pin_offsets(
+        np.ascontiguousarray(ankle, dtype=np.float64),
+        np.ascontiguousarray(toe, dtype=np.float64),
+        np.ascontiguousarray(ankle_contact, dtype=bool),
+        np.ascontiguousarray(toe_contact, dtype=bool),
+        float(ankle_ground),
+        float(toe_ground),
+        int(blend),
+        bool(hold_height),
+    )
 
 
 def _held_rotations(grot: np.ndarray, flat: np.ndarray, blend: int) -> np.ndarray:

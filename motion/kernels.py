@@ -532,6 +532,185 @@ def two_bone_ik(hip, knee, ankle, target, pole, hinted, eps, pole_weight):  # pr
     return hip_turn, knee_turn, knee_new, ankle_new
 
 
+# Foot contacts held still (``motion.ik._pin_offsets``).
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:  # pragma: no cover
+    """``np.sum(a[lo : lo + n])`` of a 1-D array, added in numpy's pairwise order."""
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += a[lo + i]
+        return total
+    if n <= 128:
+        r = a[lo : lo + 8].copy()
+        i = 8
+        while i < n - n % 8:
+            for k in range(8):
+                r[k] += a[lo + i + k]
+            i += 8
+        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < n:
+            total += a[lo + i]
+            i += 1
+        return total
+    half = n // 2
+    half -= half % 8
+    return _pairwise_sum(a, lo, half) + _pairwise_sum(a, lo + half, n - half)
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _smoothstep(x: float) -> float:  # pragma: no cover
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def _runs(mask: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """``(R, 2)`` starts and stops of the runs of True in ``mask``."""
+    out = np.empty((mask.shape[0] // 2 + 1, 2), np.int64)
+    count = 0
+    inside = False
+    for i in range(mask.shape[0]):
+        if mask[i] and not inside:
+            out[count, 0] = i
+            inside = True
+        elif not mask[i] and inside:
+            out[count, 1] = i
+            count += 1
+            inside = False
+    if inside:
+        out[count, 1] = mask.shape[0]
+        count += 1
+    return out[:count]
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def pin_offsets(ankle, toe, ankle_contact, toe_contact, ankle_ground, toe_ground, blend,
+                hold_height):  # fmt: skip  # pragma: no cover
+    """``motion.ik._pin_offsets`` (its docstring says what), ``toe`` and ``toe_contact``
+    given (the ankle and no contact where the foot has no toe)."""
+    frames = ankle.shape[0]
+    roll = np.zeros(frames)
+    contact = ankle_contact | toe_contact
+    both = toe_contact & ankle_contact
+    for f in range(frames):
+        if toe_contact[f] and not ankle_contact[f]:
+            roll[f] = 1.0
+    for run in _runs(both):
+        start, stop = run[0], run[1]
+        first = 1.0 if start > 0 and roll[start - 1] == 1.0 else 0.0
+        last = 0.0 if stop < frames and contact[stop] and roll[stop] == 0.0 else 1.0
+        for f in range(start, stop):
+            roll[f] = first + (last - first) * ((f - start + 1) / (stop - start + 1))
+    anchor = np.empty((frames, 3))
+    ground = np.empty(frames)
+    step = np.zeros((frames, 3))
+    for f in range(frames):
+        ground[f] = ankle_ground + roll[f] * (toe_ground - ankle_ground)
+        for c in range(3):
+            anchor[f, c] = ankle[f, c] + roll[f] * (toe[f, c] - ankle[f, c])
+            if f > 0:
+                step[f, c] = anchor[f, c] - (
+                    ankle[f - 1, c] + roll[f] * (toe[f - 1, c] - ankle[f - 1, c])
+                )
+    offsets = np.zeros((frames, 3))
+    runs = _runs(contact)
+    drift = np.empty((frames, 3))
+    column = np.empty(frames)
+    for run in runs:
+        start, stop = run[0], run[1]
+        n = stop - start
+        for c in range(3):  # the anchor's slide within the contact, from its first frame
+            total = 0.0
+            for f in range(start, stop):
+                total += step[f, c]
+                drift[f, c] = total
+            first = drift[start, c]
+            for f in range(start, stop):
+                drift[f, c] -= first
+        for c in (0, 2):  # held at the slide's average on the floor
+            for f in range(start, stop):
+                column[f] = drift[f, c]
+            mean = _pairwise_sum(column, start, n) / n
+            for f in range(start, stop):
+                offsets[f, c] = -drift[f, c] + mean
+        for f in range(start, stop):  # and at the ground level vertically
+            column[f] = ground[f] - (anchor[f, 1] - drift[f, 1])
+        mean = _pairwise_sum(column, start, n) / n
+        for f in range(start, stop):
+            offsets[f, 1] = -drift[f, 1] + mean
+    if blend > 0:  # ramps in the gaps: towards zero for long ones, straight across short
+        for g in range(runs.shape[0] + 1):
+            gap_start = 0 if g == 0 else runs[g - 1, 1]
+            next_start = frames if g == runs.shape[0] else runs[g, 0]
+            gap = next_start - gap_start
+            if gap <= 0:
+                continue
+            for c in range(3):
+                left = offsets[gap_start - 1, c] if g > 0 else 0.0
+                right = offsets[next_start, c] if next_start < frames else 0.0
+                for k in range(gap):
+                    t = float(k + 1)
+                    if g > 0 and next_start < frames and gap <= 2 * blend:
+                        w = _smoothstep(t / (gap + 1))
+                        value = (1.0 - w) * left + w * right
+                    else:
+                        fade_out = 1.0 - _smoothstep(t / (blend + 1))
+                        fade_in = _smoothstep((t - gap - 1 + blend + 1) / (blend + 1))
+                        value = fade_out * left + fade_in * right
+                    offsets[gap_start + k, c] = value
+    if not hold_height:
+        for f in range(frames):
+            offsets[f, 1] = max(offsets[f, 1], 0.0)
+    return offsets
+
+
+# Spherical interpolation (``motion.rotations.slerp``) around numpy's arccos, whose compiled
+# counterpart differs in the last bit on a tenth of inputs.
+
+
+@numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->()", cache=CACHE, nopython=True)
+def dot(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """Dot products ``(...)`` of vectors ``(..., n)``, added as numpy's einsum adds up to
+    7 components."""
+    even = 0.0
+    odd = 0.0
+    for i in range(0, a.shape[0] - 1, 2):
+        even += a[i] * b[i]
+        odd += a[i + 1] * b[i + 1]
+    if a.shape[0] % 2:
+        even += a[a.shape[0] - 1] * b[a.shape[0] - 1]
+    out[0] = even + odd
+
+
+@numba.guvectorize(
+    ["void(f8[:], f8[:], f8, f8, f8, f8[:])"], "(n),(n),(),(),()->(n)", cache=CACHE, nopython=True
+)
+def slerp_mix(a, b, t, theta, d, out):  # pragma: no cover
+    """Unit quaternions ``a`` and ``b`` mixed at ``t``, ``theta = arccos(min(|d|, 1))``
+    and ``d`` their dot product: the nearer of ``b`` and ``-b``, normalised."""
+    s = np.sin(theta)
+    small = s < 1e-6
+    if small:
+        s = 1.0
+    sign = -1.0 if d < 0 else 1.0
+    wa = 1.0 - t if small else np.sin((1.0 - t) * theta) / s
+    wb = (t if small else np.sin(t * theta) / s) * sign
+    q0, q1, q2, q3 = (
+        wa * a[0] + wb * b[0],
+        wa * a[1] + wb * b[1],
+        wa * a[2] + wb * b[2],
+        wa * a[3] + wb * b[3],
+    )
+    size = np.sqrt((q0 * q0 + q2 * q2) + (q1 * q1 + q3 * q3))
+    if size > 1e-12:
+        out[0], out[1], out[2], out[3] = q0 / size, q1 / size, q2 / size, q3 / size
+    else:
+        out[0], out[1], out[2], out[3] = 0.0, 0.0, 0.0, 1.0
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -540,6 +719,8 @@ def warm() -> None:
     quat_mul(q, q)
     quat_apply(q, v)
     norm(v)
+    dot(q, q)
+    slerp_mix(q, q, np.zeros(1), np.zeros(1), np.ones(1))
     cross(v, v)
     fk(q[None], v[None], np.zeros(1, np.int64), np.ones(1, np.bool_))
     format_fixed(v)
@@ -547,5 +728,6 @@ def warm() -> None:
     from_6d(np.zeros((1, 6)))
     from_matrix(np.eye(3)[None])
     to_matrix(q)
+    pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)

@@ -217,17 +217,10 @@ def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """Spherical interpolation from ``a`` to ``b`` (``(..., 4)``) at ``t`` (broadcasting)."""
     a = normalize(a)
     b = normalize(b)
-    t = np.asarray(t, dtype=np.float64)  # broadcasts against a.shape[:-1]
-    d = np.einsum("...i,...i->...", a, b)
-    # per rotation, not per component: b's sign (the nearer of b and -b) goes into its weight
-    sign = np.where(d < 0, -1.0, 1.0)
+    d = kernels.dot(a, b)
     theta = np.arccos(np.minimum(np.abs(d), 1.0))
-    s = np.sin(theta)
-    small = s < 1e-6
-    s = np.where(small, 1.0, s)
-    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / s)
-    wb = np.where(small, t, np.sin(t * theta) / s) * sign
-    return normalize(wa[..., None] * a + wb[..., None] * b)
+    # t broadcasts against a.shape[:-1]
+    return kernels.slerp_mix(a, b, np.asarray(t, dtype=np.float64), theta, d)
 
 
 def yaw(q: np.ndarray) -> np.ndarray:
