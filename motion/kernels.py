@@ -43,16 +43,16 @@ _EXACT_POWERS = 10.0 ** np.arange(23)  # exact floats too
 @numba.njit(cache=CACHE, nogil=True)
 def read_numbers(data: np.ndarray, channels: int) -> tuple:
     """The numbers of a motion block ``data`` (uint8 bytes), ``channels`` on each non-blank
-        line, as ``(values (F * channels,), slow (K, 3), status, line)``.
+    line, as ``(values (F * channels,), slow (K, 3), status, line)``.
 
-        A plain decimal (sign, up to 15 digits, one point, an exponent) is exact as an integer
-        mantissa times or over an exact power of ten, one correctly rounded operation: it
-        equals ``float()`` of its text. Any other token (more digits, ``nan``, no number) is
-        left for ``float()``: its byte span and its index in ``values`` are a row of ``slow``,
-    its value NaN.
-        ``status``: ``READ_OK``; ``READ_COUNT``, line ``line`` (0-based within ``data``) has
-        another count of numbers (the values are then unfinished); ``READ_SLOW``, every line
-        has the count but more than ``MAX_SLOW`` tokens are left for ``float()``."""
+    A plain decimal (sign, up to 15 digits, one point, an exponent) is exact as an integer
+    mantissa times or over an exact power of ten, one correctly rounded operation: it
+    equals ``float()`` of its text. Any other token (more digits, ``nan``, no number) is
+    left for ``float()``: its byte span and its index in ``values`` are a row of ``slow``,
+    its value NaN. ``status``: ``READ_OK``; ``READ_COUNT``, line ``line`` (0-based within
+    ``data``) has another count of numbers (the values are then unfinished);
+    ``READ_SLOW``, every line has the count but more than ``MAX_SLOW`` tokens are left for
+    ``float()``."""
     n = data.shape[0]
     # every full row takes 2 * channels - 1 bytes or more and a row that is not full ends
     # the reading: a bound on the rows without a pass to count them (pages never written
@@ -66,65 +66,66 @@ def read_numbers(data: np.ndarray, channels: int) -> tuple:
     i = 0
     while i < n:
         c = data[i]
-        if c == 10:
-            if on_line != 0 and on_line != channels:
-                return values, slow[:s], READ_COUNT, line
-            on_line = 0
-            line += 1
-            i += 1
-            continue
         if c <= 32:
+            if c == 10:
+                if on_line != 0 and on_line != channels:
+                    return values, slow[:s], READ_COUNT, line
+                on_line = 0
+                line += 1
             i += 1
             continue
-        start = i
-        while i < n and data[i] > 32:
-            i += 1
         if on_line == channels:
             return values, slow[:s], READ_COUNT, line
         on_line += 1
-        j = start
-        negative = data[j] == 45
-        if negative or data[j] == 43:
-            j += 1
+        start = i
+        negative = c == 45
+        if negative or c == 43:
+            i += 1
         mantissa = 0
-        digits = 0  # significant ones
-        seen = False  # any digit
-        scale = 0  # decimal exponent of the mantissa's last digit
-        point = False
+        digits = 0
+        point = -1  # digits before the point
+        scale = 0
         plain = True
-        while j < i and plain:
-            b = data[j]
-            j += 1
+        while i < n:
+            b = np.int64(data[i])
             if 48 <= b <= 57:
-                seen = True
-                digits += digits > 0 or b != 48
                 mantissa = mantissa * 10 + (b - 48)
-                scale -= point
-                plain = digits <= _EXACT_DIGITS
-            elif b == 46 and not point:
-                point = True
-            elif (b == 101 or b == 69) and seen:
-                negative_exponent = j < i and data[j] == 45
-                j += j < i and (data[j] == 45 or data[j] == 43)
+                digits += 1
+            elif b == 46 and point < 0:
+                point = digits
+            elif b <= 32:
+                break
+            elif (b == 101 or b == 69) and digits > 0:
+                i += 1
+                negative_exponent = i < n and data[i] == 45
+                if i < n and (data[i] == 45 or data[i] == 43):
+                    i += 1
                 e = 0
-                plain = 0 < i - j <= 3
-                while j < i and plain:
-                    b = data[j]
-                    j += 1
-                    plain = 48 <= b <= 57
-                    e = e * 10 + (b - 48)
-                scale += -e if negative_exponent else e
+                length = 0
+                while i < n and 48 <= data[i] <= 57:
+                    e = e * 10 + (np.int64(data[i]) - 48)
+                    length += 1
+                    i += 1
+                plain = 0 < length <= 3
+                scale = -e if negative_exponent else e
                 break
             else:
                 plain = False
-        if plain and seen and -22 <= scale <= 22:
+                break
+            i += 1
+        while i < n and data[i] > 32:  # the rest of a token that is not plain
+            plain = False
+            i += 1
+        if point >= 0:
+            scale -= digits - point
+        if plain and 0 < digits <= _EXACT_DIGITS and -22 <= scale <= 22:
             value = float(mantissa)
             if scale < 0:
                 value /= _EXACT_POWERS[-scale]
             elif scale > 0:
                 value *= _EXACT_POWERS[scale]
             values[k] = -value if negative else value
-        else:
+        else:  # leading zeros count as digits here: float() reads those few
             if s < MAX_SLOW:
                 slow[s, 0] = start
                 slow[s, 1] = i
@@ -139,13 +140,15 @@ def read_numbers(data: np.ndarray, channels: int) -> tuple:
     return values[:k], slow[:s], READ_OK, line
 
 
+_PAIRS = np.frombuffer(b"".join(b"%02d" % i for i in range(100)), np.uint8)  # "00".."99"
+
+
 @numba.njit(cache=CACHE, nogil=True)
 def format_fixed(values: np.ndarray) -> np.ndarray:
     """Rows of finite ``values (F, C)``, each below 1e12 in size, as ASCII bytes: ``%.6f``
     numbers (rounded as ``np.rint(v * 1e6)``), separated by spaces, one row a line."""
     frames, channels = values.shape
     out = np.empty(frames * channels * 22 + frames, np.uint8)
-    digits = np.empty(20, np.uint8)
     k = 0
     for f in range(frames):
         for c in range(channels):
@@ -156,24 +159,30 @@ def format_fixed(values: np.ndarray) -> np.ndarray:
                 scaled = -scaled
             whole = scaled // 1_000_000
             fraction = scaled - whole * 1_000_000
-            d = 0
-            while True:
-                digits[d] = 48 + whole % 10
-                whole //= 10
-                d += 1
-                if whole == 0:
-                    break
-            for t in range(d - 1, -1, -1):
-                out[k] = digits[t]
-                k += 1
+            width = 1
+            bound = 10
+            while whole >= bound:
+                width += 1
+                bound *= 10
+            end = k + width
+            while whole >= 10:  # two digits at a time, from the last
+                pair = whole % 100
+                whole //= 100
+                out[end - 2] = _PAIRS[2 * pair]
+                out[end - 1] = _PAIRS[2 * pair + 1]
+                end -= 2
+            if end > k:
+                out[k] = 48 + whole
+            k += width
             out[k] = 46
-            k += 1
-            for t in range(5, -1, -1):
-                out[k + t] = 48 + fraction % 10
-                fraction //= 10
-            k += 6
-            out[k] = 32 if c < channels - 1 else 10
-            k += 1
+            high = fraction // 10_000
+            middle = (fraction // 100) % 100
+            low = fraction % 100
+            out[k + 1], out[k + 2] = _PAIRS[2 * high], _PAIRS[2 * high + 1]
+            out[k + 3], out[k + 4] = _PAIRS[2 * middle], _PAIRS[2 * middle + 1]
+            out[k + 5], out[k + 6] = _PAIRS[2 * low], _PAIRS[2 * low + 1]
+            out[k + 7] = 32 if c < channels - 1 else 10
+            k += 8
     return out[:k]
 
 
