@@ -352,29 +352,24 @@ def _line_of_row(block: bytes, row: int) -> int:
 
 def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
     """Channel values ``(F, C)`` -> a motion: position channels replace offsets, rotation
-    channels become quaternions, one conversion per Euler order (not per joint)."""
-    frames = values.shape[0]
-    pos_cols, pos_joint, pos_axis = [], [], []
-    rot_cols, rot_joint, rot_slot = [], [], []
+    channels become quaternions (``kernels.channels_to_motion``)."""
+    joints = skeleton.num_joints
+    position_column = np.full((joints, 3), -1, dtype=np.int64)
+    angle_column = np.full((joints, 3), -1, dtype=np.int64)
+    axes = np.empty((joints, 3), dtype=np.int64)
     col = 0
     for j, chans in enumerate(skeleton.channels):
         order = skeleton.rotation_order(j)
+        axes[j] = ["XYZ".index(a) for a in order]
         for c in chans:
             if c in POSITION_CHANNELS:
-                pos_cols.append(col), pos_joint.append(j), pos_axis.append("XYZ".index(c[0]))
+                position_column[j, "XYZ".index(c[0])] = col
             else:
-                rot_cols.append(col), rot_joint.append(j), rot_slot.append(order.index(c[0]))
+                angle_column[j, order.index(c[0])] = col
             col += 1
-    lpos = np.repeat(skeleton.offsets[None], frames, axis=0)
-    lpos[:, pos_joint, pos_axis] = values[:, pos_cols]
-    euler = np.zeros((frames, skeleton.num_joints, 3))
-    euler[:, rot_joint, rot_slot] = values[:, rot_cols]
-    lrot = np.empty((frames, skeleton.num_joints, 4))
-    orders: dict[str, list[int]] = {}
-    for j in range(skeleton.num_joints):
-        orders.setdefault(skeleton.rotation_order(j), []).append(j)
-    for order, joints in orders.items():
-        lrot[:, joints] = rotations.from_euler(euler[:, joints], order)
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    offsets = np.ascontiguousarray(skeleton.offsets, dtype=np.float64)
+    lrot, lpos = kernels.channels_to_motion(values, offsets, position_column, angle_column, axes)
     return Motion(skeleton, fps, lrot, lpos)
 
 

@@ -216,6 +216,27 @@ def fk(
     return grot, gpos
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def world_rotations(lrot: np.ndarray, parents: np.ndarray, posed: np.ndarray) -> np.ndarray:
+    """Global rotations ``(N, J, 4)`` of local ones, parents first: :func:`fk` without the
+    positions; joints not ``posed`` are left zero."""
+    frames, joints = lrot.shape[0], lrot.shape[1]
+    grot = np.zeros((frames, joints, 4))
+    for f in range(frames):
+        grot[f, 0] = lrot[f, 0]
+        for j in range(1, joints):
+            if not posed[j]:
+                continue
+            p = parents[j]
+            x, y, z, w = grot[f, p, 0], grot[f, p, 1], grot[f, p, 2], grot[f, p, 3]
+            bx, by, bz, bw = lrot[f, j, 0], lrot[f, j, 1], lrot[f, j, 2], lrot[f, j, 3]
+            grot[f, j, 0] = w * bx + x * bw + y * bz - z * by
+            grot[f, j, 1] = w * by - x * bz + y * bw + z * bx
+            grot[f, j, 2] = w * bz + x * by - y * bx + z * bw
+            grot[f, j, 3] = w * bw - x * bx - y * by - z * bz
+    return grot
+
+
 # Quaternion arithmetic as numpy generalised ufuncs: broadcasting, any strides, one pass
 # (numpy's per-component version made a dozen temporaries, 6x the time on every size).
 
@@ -324,25 +345,52 @@ def from_6d(r6: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _euler_quaternion(a, b, c, i, j, k, out, n):  # pragma: no cover
+    """``out[n]``: the quaternion of intrinsic angles ``a, b, c`` (radians) about axes
+    ``i, j, k``, the product of the three axis quaternions written out."""
+    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
+    ha, hb, hc = a * 0.5, b * 0.5, c * 0.5
+    ca, cb, cc = np.cos(ha), np.cos(hb), np.cos(hc)
+    sa, sb, sc = np.sin(ha), np.sin(hb), np.sin(hc)
+    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+    out[n, i] = sacb * cc + p * casb * sc
+    out[n, j] = casb * cc - p * sacb * sc
+    out[n, k] = cacb * sc + p * sasb * cc
+    out[n, 3] = cacb * cc - p * sasb * sc
+
+
 @numba.njit(cache=CACHE, nogil=True)
 def from_euler(e: np.ndarray, i: int, j: int, k: int, degrees: bool) -> np.ndarray:
     """Quaternions ``(N, 4)`` of intrinsic Euler angles ``(N, 3)`` about axes ``i, j, k``
-    (R = Ri(a) Rj(b) Rk(c)): the product of the three axis quaternions, written out."""
-    p = 1.0 if (j - i) % 3 == 1 else -1.0  # e_i x e_j = p e_k
+    (R = Ri(a) Rj(b) Rk(c))."""
+    scale = _DEGREE if degrees else 1.0
     out = np.empty((e.shape[0], 4))
     for n in range(e.shape[0]):
-        if degrees:
-            ha, hb, hc = e[n, 0] * _DEGREE * 0.5, e[n, 1] * _DEGREE * 0.5, e[n, 2] * _DEGREE * 0.5
-        else:
-            ha, hb, hc = e[n, 0] * 0.5, e[n, 1] * 0.5, e[n, 2] * 0.5
-        ca, cb, cc = np.cos(ha), np.cos(hb), np.cos(hc)
-        sa, sb, sc = np.sin(ha), np.sin(hb), np.sin(hc)
-        cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
-        out[n, i] = sacb * cc + p * casb * sc
-        out[n, j] = casb * cc - p * sacb * sc
-        out[n, k] = cacb * sc + p * sasb * cc
-        out[n, 3] = cacb * cc - p * sasb * sc
+        _euler_quaternion(e[n, 0] * scale, e[n, 1] * scale, e[n, 2] * scale, i, j, k, out, n)
     return out
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def channels_to_motion(values, offsets, position_column, angle_column, axes):  # pragma: no cover
+    """A BVH's channel values ``(F, C)`` as local rotations ``(F, J, 4)`` and translations
+    ``(F, J, 3)``: ``position_column (J, 3)`` the column of each joint's X, Y, Z position
+    (-1: its offset), ``angle_column (J, 3)`` the column of each angle of its Euler order
+    (-1: 0 degrees), ``axes (J, 3)`` that order's axes."""
+    frames, joints = values.shape[0], offsets.shape[0]
+    lrot = np.empty((frames, joints, 4))
+    lpos = np.empty((frames, joints, 3))
+    for f in range(frames):
+        for j in range(joints):
+            for a in range(3):
+                col = position_column[j, a]
+                lpos[f, j, a] = values[f, col] if col >= 0 else offsets[j, a]
+            c0, c1, c2 = angle_column[j, 0], angle_column[j, 1], angle_column[j, 2]
+            a0 = values[f, c0] * _DEGREE if c0 >= 0 else 0.0
+            a1 = values[f, c1] * _DEGREE if c1 >= 0 else 0.0
+            a2 = values[f, c2] * _DEGREE if c2 >= 0 else 0.0
+            _euler_quaternion(a0, a1, a2, axes[j, 0], axes[j, 1], axes[j, 2], lrot[f], j)
+    return lrot, lpos
 
 
 @numba.njit(cache=CACHE, nogil=True)
@@ -732,8 +780,12 @@ def warm() -> None:
     slerp_mix(q, q, np.zeros(1), np.zeros(1), np.ones(1))
     cross(v, v)
     fk(q[None], v[None], np.zeros(1, np.int64), np.ones(1, np.bool_))
+    world_rotations(q[None], np.zeros(1, np.int64), np.ones(1, np.bool_))
     format_fixed(v)
     from_euler(v, 2, 0, 1, True)
+    channels_to_motion(
+        v, v, np.zeros((1, 3), np.int64), np.zeros((1, 3), np.int64), np.array([[2, 0, 1]])
+    )
     from_6d(np.zeros((1, 6)))
     from_matrix(np.eye(3)[None])
     to_matrix(q)

@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from motion import canonical as C
+from motion import kernels, rig_mapping
 from motion import kinematics as K
-from motion import rig_mapping
 from motion import rotations as rot
 from motion.rig_mapping import REQUIRED
 from motion.skeleton import Motion, Skeleton
@@ -128,14 +128,9 @@ def _correction(c: _Correction, lrot: np.ndarray, lpos: np.ndarray) -> np.ndarra
 
 def _world_rotations(lrot: np.ndarray, parents: np.ndarray, needed: np.ndarray) -> np.ndarray:
     """World rotations ``(F, J, 4)`` of the ``needed`` joints (whose parents are needed
-    too), a level of the hierarchy at a time; the others are left unset."""
-    grot = np.empty(lrot.shape)
-    grot[:, 0] = lrot[:, 0]
-    for joints, above in K.levels(parents):
-        keep = needed[joints]
-        if keep.any():
-            grot[:, joints[keep]] = rot.mul(grot[:, above[keep]], lrot[:, joints[keep]])
-    return grot
+    too); the others are left zero."""
+    lrot = np.ascontiguousarray(lrot, dtype=np.float64)
+    return kernels.world_rotations(lrot, np.asarray(parents, dtype=np.int64), needed)
 
 
 @dataclass(frozen=True)
