@@ -768,6 +768,22 @@ def slerp_mix(a, b, t, theta, d, out):  # pragma: no cover
         out[0], out[1], out[2], out[3] = 0.0, 0.0, 0.0, 1.0
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def overlap_add(windows: np.ndarray, starts: np.ndarray, weight: np.ndarray, frames: int):
+    """Windows ``(N, C, L)`` laid at ``starts`` on ``frames`` frames, each weighted by
+    ``weight (L,)``, added in order: the sums ``(frames, C)`` and the weights' ``(frames,)``."""
+    count, channels, length = windows.shape
+    out = np.zeros((frames, channels))
+    total = np.zeros(frames)
+    for w in range(count):
+        start = starts[w]
+        for t in range(length):
+            for c in range(channels):
+                out[start + t, c] += weight[t] * windows[w, c, t]
+            total[start + t] += weight[t]
+    return out, total
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -789,6 +805,7 @@ def warm() -> None:
     from_6d(np.zeros((1, 6)))
     from_matrix(np.eye(3)[None])
     to_matrix(q)
+    overlap_add(np.zeros((1, 1, 1), np.float32), np.zeros(1, np.int64), np.ones(1), 1)
     pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)

@@ -38,7 +38,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from motion import contacts as CT
 from motion import features as Fe
-from motion import ik
+from motion import ik, kernels
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from motion.styles import taken_from_normal
@@ -461,12 +461,10 @@ class TranslatorEngine(Engine):
         """Decoded windows ``(N, C, length)`` (as :meth:`_windows` cut them) -> ``(frames, C)``,
         overlaps blended with Hann weights (every weight > 0, so every frame is covered)."""
         length = windows.shape[2]
-        weight = np.hanning(length + 2)[1:-1, None]
-        total = np.zeros((frames, 1))
-        out = np.zeros((frames, windows.shape[1]))
-        for window, start in zip(windows, window_starts(frames, length), strict=True):
-            out[start : start + length] += weight * window.T
-            total[start : start + length] += weight
+        weight = np.hanning(length + 2)[1:-1]
+        starts = np.asarray(window_starts(frames, length), dtype=np.int64)
+        out, total = kernels.overlap_add(windows, starts, weight, frames)
+        total = total[:, None]
         return (out / total).astype(np.float32)
 
     # --- style codes -----------------------------------------------------------------------
