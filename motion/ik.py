@@ -413,19 +413,17 @@ def _turn_leg(
     """``lrot``'s leg joints at frames ``f`` turned by an IK solution (world-frame turns
     of the thigh and, after it, the shin); the ankle keeps its global rotation."""
     hip, knee, ankle, _ = leg
-    new_grot = {}
-    for j in _chain(parents, hip, knee):
-        new_grot[j] = rot.mul(hip_turn, grot[f, j])
-    shin_turn = rot.mul(knee_turn, hip_turn)
-    for j in _chain(parents, knee, ankle):
-        new_grot[j] = rot.mul(shin_turn, grot[f, j])
-    new_grot[ankle] = grot[f, ankle]
-    for j, g in new_grot.items():
-        p = int(parents[j])
-        parent_rot = new_grot.get(p, grot[f, p])
-        local = rot.mul(rot.inv(parent_rot), g)
-        # keep the old quaternion's sign so the clip stays continuous
-        lrot[f, j] = np.where(_dot(local, lrot[f, j]) < 0, -local, local)
+    kernels.turn_leg(
+        lrot,
+        np.ascontiguousarray(grot),
+        np.asarray(parents, dtype=np.int64),
+        np.array(_chain(parents, hip, knee), dtype=np.int64),
+        np.array(_chain(parents, knee, ankle), dtype=np.int64),
+        int(ankle),
+        np.asarray(f, dtype=np.int64),
+        np.ascontiguousarray(hip_turn, dtype=np.float64),
+        np.ascontiguousarray(knee_turn, dtype=np.float64),
+    )
 
 
 CANONICAL_LEGS = [

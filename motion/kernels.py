@@ -784,6 +784,60 @@ def overlap_add(windows: np.ndarray, starts: np.ndarray, weight: np.ndarray, fra
     return out, total
 
 
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _product(a, b, out, n):  # pragma: no cover
+    """``out[n] = a * b`` of quaternions held as arrays ``(4,)``."""
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    out[n, 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[n, 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[n, 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[n, 3] = aw * bw - ax * bx - ay * by - az * bz
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def turn_leg(
+    lrot, grot, parents, thigh_chain, shin_chain, ankle, frames, hip_turn, knee_turn
+):  # pragma: no cover
+    """``motion.ik._turn_leg``: ``lrot``'s joints of ``thigh_chain`` (hip down to above
+    the knee) turned by ``hip_turn``, of ``shin_chain`` (knee down to above the ankle) by
+    ``knee_turn * hip_turn``, at ``frames``, the ankle keeping its global rotation, each
+    local rotation on the side of the old one (in place)."""
+    joints = np.concatenate((thigh_chain, shin_chain, np.array([ankle])))
+    new = np.empty((joints.shape[0], 4))
+    shin = np.empty((1, 4))
+    inverse = np.empty(4)
+    local = np.empty((1, 4))
+    for n in range(frames.shape[0]):
+        f = frames[n]
+        _product(knee_turn[n], hip_turn[n], shin, 0)
+        for i in range(thigh_chain.shape[0]):
+            _product(hip_turn[n], grot[f, thigh_chain[i]], new, i)
+        for i in range(shin_chain.shape[0]):
+            _product(shin[0], grot[f, shin_chain[i]], new, thigh_chain.shape[0] + i)
+        new[joints.shape[0] - 1] = grot[f, ankle]
+        for i in range(joints.shape[0]):
+            j = joints[i]
+            p = parents[j]
+            parent = grot[f, p]
+            for k in range(joints.shape[0]):
+                if joints[k] == p:
+                    parent = new[k]
+            inverse[0], inverse[1], inverse[2], inverse[3] = (
+                -parent[0],
+                -parent[1],
+                -parent[2],
+                parent[3],
+            )
+            _product(inverse, new[i], local, 0)
+            old = lrot[f, j]
+            agree = (local[0, 0] * old[0] + local[0, 2] * old[2]) + (
+                local[0, 1] * old[1] + local[0, 3] * old[3]
+            )
+            for c in range(4):
+                lrot[f, j, c] = -local[0, c] if agree < 0 else local[0, c]
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -808,4 +862,6 @@ def warm() -> None:
     overlap_add(np.zeros((1, 1, 1), np.float32), np.zeros(1, np.int64), np.ones(1), 1)
     pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
+    one = np.zeros(1, np.int64)
+    turn_leg(q[None].copy(), q[None], one, one, one, 0, one, q, q)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)
