@@ -1,5 +1,7 @@
 """Typed dependencies for route handlers. Everything lives on ``app.state`` (set by the app
-factory), so an app built with its own :class:`Settings` sees its own objects."""
+factory), so an app built with its own :class:`Settings` sees its own objects. Each is
+``async``: FastAPI runs a plain function dependency in its thread pool, a thread hop per
+dependency and request for an attribute read."""
 
 from __future__ import annotations
 
@@ -13,19 +15,19 @@ from service.registered_styles import StyleStore
 from service.registry import ModelRegistry
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_registry(request: Request) -> ModelRegistry:
+async def get_registry(request: Request) -> ModelRegistry:
     return request.app.state.registry
 
 
-def get_runner(request: Request) -> InferenceRunner:
+async def get_runner(request: Request) -> InferenceRunner:
     return request.app.state.runner
 
 
-def get_styles(request: Request) -> StyleStore:
+async def get_styles(request: Request) -> StyleStore:
     return request.app.state.styles
 
 

@@ -71,7 +71,7 @@ class StyleFields:
     style_mapping: str | None
 
 
-def read_style_fields(
+async def read_style_fields(
     style: Annotated[UploadFile, File(description=STYLE_DOC["style"])] = None,
     keypoints: Annotated[UploadFile, File(description=STYLE_DOC["keypoints"])] = None,
     style_name: Annotated[
