@@ -838,6 +838,40 @@ def turn_leg(
                 lrot[f, j, c] = -local[0, c] if agree < 0 else local[0, c]
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def slerp_ends(lrot: np.ndarray, first: np.ndarray, second: np.ndarray) -> tuple:
+    """The two ends of each resampled frame's slerp: ``lrot (F, J, 4)`` at frames ``first``
+    and ``second`` ``(N,)``, each normalised (a zero quaternion as the identity), and
+    their dot products ``(N, J)`` (as :func:`dot`)."""
+    count, joints = first.shape[0], lrot.shape[1]
+    a = np.empty((count, joints, 4))
+    b = np.empty((count, joints, 4))
+    d = np.empty((count, joints))
+    for n in range(count):
+        for j in range(joints):
+            for end, frame in ((a, first[n]), (b, second[n])):
+                x, y, z, w = (
+                    lrot[frame, j, 0],
+                    lrot[frame, j, 1],
+                    lrot[frame, j, 2],
+                    lrot[frame, j, 3],
+                )
+                size = np.sqrt((x * x + z * z) + (y * y + w * w))
+                if size > 1e-12:
+                    end[n, j, 0], end[n, j, 1], end[n, j, 2], end[n, j, 3] = (
+                        x / size,
+                        y / size,
+                        z / size,
+                        w / size,
+                    )
+                else:
+                    end[n, j, 0], end[n, j, 1], end[n, j, 2], end[n, j, 3] = 0.0, 0.0, 0.0, 1.0
+            d[n, j] = (a[n, j, 0] * b[n, j, 0] + a[n, j, 2] * b[n, j, 2]) + (
+                a[n, j, 1] * b[n, j, 1] + a[n, j, 3] * b[n, j, 3]
+            )
+    return a, b, d
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -859,6 +893,7 @@ def warm() -> None:
     from_6d(np.zeros((1, 6)))
     from_matrix(np.eye(3)[None])
     to_matrix(q)
+    slerp_ends(q[None], np.zeros(1, np.int64), np.zeros(1, np.int64))
     overlap_add(np.zeros((1, 1, 1), np.float32), np.zeros(1, np.int64), np.ones(1), 1)
     pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)

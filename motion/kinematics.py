@@ -207,7 +207,10 @@ def resample_at(motion: Motion, frame_positions: np.ndarray, fps: float) -> Moti
     i0 = np.clip(np.floor(t).astype(int), 0, max(motion.num_frames - 2, 0))
     i1 = np.minimum(i0 + 1, motion.num_frames - 1)
     w = (t - i0)[:, None]
-    lrot = rot.slerp(motion.lrot[i0], motion.lrot[i1], w)
+    lrot = np.ascontiguousarray(motion.lrot, dtype=np.float64)
+    a, b, d = kernels.slerp_ends(lrot, i0.astype(np.int64), i1.astype(np.int64))
+    theta = np.arccos(np.minimum(np.abs(d), 1.0))  # numpy's: rot.slerp's bits
+    lrot = kernels.slerp_mix(a, b, w, theta, d)
     lpos = motion.lpos[i0] * (1.0 - w[..., None]) + motion.lpos[i1] * w[..., None]
     return motion.replace(fps=float(fps), lrot=lrot, lpos=lpos)
 
