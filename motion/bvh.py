@@ -415,7 +415,7 @@ def _motion_block(motion: Motion) -> str:
     euler = np.zeros_like(motion.lpos)
     for order, joints in by_order.items():
         angles = rotations.to_euler(motion.lrot[:, joints], order)
-        euler[:, joints] = np.rad2deg(np.unwrap(np.deg2rad(angles), axis=0))  # no 360° jumps
+        euler[:, joints] = kernels.unwrap_degrees(angles)  # no 360° jumps
     table = np.concatenate((motion.lpos, euler), axis=1)  # (F, 2J, 3): positions, then angles
     rows, axes = [], []
     for j, chans in enumerate(sk.channels):

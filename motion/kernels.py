@@ -293,6 +293,7 @@ def cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no 
 # order (sums of squares as numpy's einsum adds them), so they give the same bits.
 
 _DEGREE = np.pi / 180.0
+_RADIAN = 180.0 / np.pi
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
@@ -872,6 +873,35 @@ def slerp_ends(lrot: np.ndarray, first: np.ndarray, second: np.ndarray) -> tuple
     return a, b, d
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def unwrap_degrees(angles: np.ndarray) -> np.ndarray:
+    """``np.rad2deg(np.unwrap(np.deg2rad(angles), axis=0))`` of ``angles (F, J, 3)``: each
+    angle's jumps of more than 180 degrees from frame to frame taken out, the same
+    arithmetic in the same order (the same bits)."""
+    frames, joints = angles.shape[0], angles.shape[1]
+    out = np.empty_like(angles)
+    if frames == 0:
+        return out
+    for j in range(joints):
+        for a in range(3):
+            previous = angles[0, j, a] * _DEGREE
+            out[0, j, a] = previous * _RADIAN
+            correction = 0.0
+            for f in range(1, frames):
+                now = angles[f, j, a] * _DEGREE
+                step = now - previous
+                wrapped = np.mod(step + np.pi, 2 * np.pi) - np.pi
+                if wrapped == -np.pi and step > 0:
+                    wrapped = np.pi
+                if not abs(step) < np.pi:
+                    correction += wrapped - step
+                else:
+                    correction += 0.0
+                out[f, j, a] = (now + correction) * _RADIAN
+                previous = now
+    return out
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -893,6 +923,7 @@ def warm() -> None:
     from_6d(np.zeros((1, 6)))
     from_matrix(np.eye(3)[None])
     to_matrix(q)
+    unwrap_degrees(v[None])
     slerp_ends(q[None], np.zeros(1, np.int64), np.zeros(1, np.int64))
     overlap_add(np.zeros((1, 1, 1), np.float32), np.zeros(1, np.int64), np.ones(1), 1)
     pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
