@@ -588,7 +588,6 @@ def lift_toes(
     parents = motion.skeleton.parents
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=_leg_joints(legs))
     lrot = motion.lrot.copy()
-    up = np.array([0.0, 1.0, 0.0])
     for i, (_, _, ankle, toe) in enumerate(legs):
         if toe is None:
             continue
@@ -605,14 +604,9 @@ def lift_toes(
         f = np.nonzero(lift > 1e-6)[0]
         if not len(f):
             continue
-        foot = gpos[f, toe] - gpos[f, ankle]
-        length = rot.norm(foot)
-        rise = np.clip(foot[:, 1] + lift[f], -0.999 * length, 0.999 * length)
-        ahead = _unit(foot * [1.0, 0.0, 1.0], np.array([0.0, 0.0, 1.0]))
-        lifted = ahead * np.sqrt(length**2 - rise**2)[:, None] + rise[:, None] * up
-        turned = rot.mul(rot.between(foot, lifted), grot[f, ankle])
-        local = rot.mul(rot.inv(grot[f, int(parents[ankle])]), turned)
-        lrot[f, ankle] = np.where(_dot(local, lrot[f, ankle]) < 0, -local, local)
+        kernels.lift_toes(
+            lrot, grot, gpos, f.astype(np.int64), lift, int(parents[ankle]), ankle, toe
+        )
     return motion.replace(lrot=lrot)
 
 

@@ -902,6 +902,41 @@ def unwrap_degrees(angles: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def lift_toes(lrot, grot, gpos, frames, lift, parent, ankle, toe):  # pragma: no cover
+    """``motion.ik.lift_toes``'s turn of one ankle at ``frames``, each raising its toe by
+    ``lift (F,)`` about the ankle (the foot's length kept, at most 0.999 of it up or down),
+    ``lrot`` in place; ``grot``, ``gpos`` the motion's forward kinematics."""
+    quaternion = np.empty((1, 4))
+    turned = np.empty((1, 4))
+    local = np.empty((1, 4))
+    inverse = np.empty(4)
+    for n in range(frames.shape[0]):
+        f = frames[n]
+        f0 = gpos[f, toe, 0] - gpos[f, ankle, 0]
+        f1 = gpos[f, toe, 1] - gpos[f, ankle, 1]
+        f2 = gpos[f, toe, 2] - gpos[f, ankle, 2]
+        length = np.sqrt(_dot3(f0, f1, f2, f0, f1, f2))
+        rise = min(max(f1 + lift[f], -0.999 * length), 0.999 * length)
+        a0, a1, a2 = _unit3(f0 * 1.0, f1 * 0.0, f2 * 1.0, 0.0, 0.0, 1.0, True)
+        reach = np.sqrt(length * length - rise * rise)
+        l0 = a0 * reach + rise * 0.0
+        l1 = a1 * reach + rise * 1.0
+        l2 = a2 * reach + rise * 0.0
+        tx, ty, tz, tw = _between3(f0, f1, f2, l0, l1, l2)
+        quaternion[0, 0], quaternion[0, 1], quaternion[0, 2], quaternion[0, 3] = tx, ty, tz, tw
+        _product(quaternion[0], grot[f, ankle], turned, 0)
+        p = grot[f, parent]
+        inverse[0], inverse[1], inverse[2], inverse[3] = -p[0], -p[1], -p[2], p[3]
+        _product(inverse, turned[0], local, 0)
+        old = lrot[f, ankle]
+        agree = (local[0, 0] * old[0] + local[0, 2] * old[2]) + (
+            local[0, 1] * old[1] + local[0, 3] * old[3]
+        )
+        for c in range(4):
+            lrot[f, ankle, c] = -local[0, c] if agree < 0 else local[0, c]
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -930,4 +965,5 @@ def warm() -> None:
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
     one = np.zeros(1, np.int64)
     turn_leg(q[None].copy(), q[None], one, one, one, 0, one, q, q)
+    lift_toes(q[None].copy(), q[None], v[None], one, np.zeros(1), 0, 0, 0)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)
