@@ -261,21 +261,20 @@ def _within_reach(hip, knee, ankle, target) -> np.ndarray:
     return out
 
 
-def _knee_poles(grot_hip, hip, knee, ankle, toe) -> np.ndarray:
-    """Forward direction of each knee ``(F, 3)``: the clip's average hinge axis in the
-    thigh's frame, or failing that (a leg never bent) the foot's direction."""
-    bend = rot.cross(knee - hip, ankle - knee)
-    hinge_local = rot.apply(rot.inv(grot_hip), bend).sum(axis=0)
-    scale = rot.norm(knee - hip).mean() * rot.norm(ankle - knee).mean()
-    if np.linalg.norm(hinge_local) > 1e-3 * scale * len(hip):
-        hinge = rot.apply(grot_hip, hinge_local / np.linalg.norm(hinge_local))
-    elif toe is not None:
-        forward = toe - ankle
-        forward[:, 1] = 0.0
-        hinge = rot.cross(forward, ankle - hip)
-    else:
-        return np.zeros_like(hip)
-    return rot.cross(ankle - hip, hinge)
+def _knee_poles(grot_hip, hip, knee, ankle, toe, frames) -> np.ndarray:
+    """Forward direction of each knee at ``frames`` ``(N, 3)``: the clip's average hinge
+    axis in the thigh's frame, or failing that (a leg never bent) the foot's direction."""
+    grot_hip, hip, knee, ankle = (np.ascontiguousarray(x, dtype=np.float64)
+                                  for x in (grot_hip, hip, knee, ankle))  # fmt: skip
+    frames = np.asarray(frames, dtype=np.int64)
+    hinge_local, thigh, shin = kernels.knee_hinge(grot_hip, hip, knee, ankle)
+    if np.linalg.norm(hinge_local) > 1e-3 * (thigh * shin) * len(hip):
+        hinge = hinge_local / np.linalg.norm(hinge_local)
+        return kernels.knee_poles(grot_hip, hip, ankle, ankle, frames, hinge, 0)
+    if toe is not None:
+        toe = np.ascontiguousarray(toe, dtype=np.float64)
+        return kernels.knee_poles(grot_hip, hip, ankle, toe, frames, np.zeros(3), 1)
+    return np.zeros((len(frames), 3))
 
 
 def pin_feet(
@@ -386,8 +385,8 @@ def _move_ankles(
     poles = [
         _knee_poles(
             grot[:, hip], gpos[:, hip], gpos[:, knee], gpos[:, ankle],
-            None if toe is None else gpos[:, toe],
-        )[f]
+            None if toe is None else gpos[:, toe], f,
+        )
         for (hip, knee, ankle, toe), f, _ in todo
     ]  # fmt: skip
     hip, knee, ankle = (np.concatenate([gpos[f, leg[k]] for leg, f, _ in todo]) for k in range(3))

@@ -594,28 +594,77 @@ def two_bone_ik(hip, knee, ankle, target, pole, hinted, eps, pole_weight):  # pr
 
 
 @numba.njit(cache=CACHE, nogil=True)
-def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:  # pragma: no cover
-    """``np.sum(a[lo : lo + n])`` of a 1-D array, added in numpy's pairwise order."""
+def _block_sum(a: np.ndarray, lo: int, n: int) -> float:  # pragma: no cover
+    """numpy's sum of at most 128 numbers: one by one below 8, else eight running sums."""
     if n < 8:
         total = 0.0
         for i in range(n):
             total += a[lo + i]
         return total
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0, r1, r2, r3 = r0 + a[lo + i], r1 + a[lo + i + 1], r2 + a[lo + i + 2], r3 + a[lo + i + 3]
+        r4, r5, r6, r7 = (
+            r4 + a[lo + i + 4],
+            r5 + a[lo + i + 5],
+            r6 + a[lo + i + 6],
+            r7 + a[lo + i + 7],
+        )
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += a[lo + i]
+        i += 1
+    return total
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:  # pragma: no cover
+    """``np.sum(a[lo : lo + n])`` of a 1-D array, added in numpy's pairwise order: blocks
+    of up to 128, halves (rounded to eights) added to each other. The halving runs on a
+    stack of its own: numba's cached code cannot call itself."""
     if n <= 128:
-        r = a[lo : lo + 8].copy()
-        i = 8
-        while i < n - n % 8:
-            for k in range(8):
-                r[k] += a[lo + i + k]
-            i += 8
-        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < n:
-            total += a[lo + i]
-            i += 1
-        return total
-    half = n // 2
-    half -= half % 8
-    return _pairwise_sum(a, lo, half) + _pairwise_sum(a, lo + half, n - half)
+        return _block_sum(a, lo, n)
+    starts = np.empty(64, np.int64)
+    counts = np.empty(64, np.int64)
+    waiting = np.zeros(64, np.int64)  # 0: not split yet, 1: left half pending, 2: right half
+    left = np.empty(64)
+    top = 0
+    starts[0], counts[0], waiting[0] = lo, n, 0
+    value = 0.0
+    returned = False
+    while True:
+        if returned:
+            if top < 0:
+                return value
+            if waiting[top] == 1:  # the left half is done: on to the right one
+                left[top] = value
+                waiting[top] = 2
+                half = counts[top] // 2
+                half -= half % 8
+                top += 1
+                starts[top], counts[top], waiting[top] = (
+                    starts[top - 1] + half,
+                    counts[top - 1] - half,
+                    0,
+                )
+                returned = False
+            else:
+                value = left[top] + value
+                top -= 1
+            continue
+        if counts[top] <= 128:
+            value = _block_sum(a, starts[top], counts[top])
+            returned = True
+            top -= 1
+        else:
+            waiting[top] = 1
+            half = counts[top] // 2
+            half -= half % 8
+            top += 1
+            starts[top], counts[top], waiting[top] = starts[top - 1], half, 0
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
@@ -937,6 +986,49 @@ def lift_toes(lrot, grot, gpos, frames, lift, parent, ankle, toe):  # pragma: no
             lrot[f, ankle, c] = -local[0, c] if agree < 0 else local[0, c]
 
 
+@numba.njit(cache=CACHE, nogil=True)
+def knee_hinge(grot_hip, hip, knee, ankle):  # pragma: no cover
+    """``motion.ik._knee_poles``'s sums over the clip: the knee's bend axis in the thigh's
+    frame ``(3,)``, and the thigh's and shin's mean lengths, added as numpy adds them
+    (the columns of an ``(F, 3)`` array frame by frame, a 1-D array pairwise)."""
+    frames = hip.shape[0]
+    columns = np.empty((5, frames))
+    for f in range(frames):
+        t0, t1, t2 = knee[f, 0] - hip[f, 0], knee[f, 1] - hip[f, 1], knee[f, 2] - hip[f, 2]
+        s0, s1, s2 = ankle[f, 0] - knee[f, 0], ankle[f, 1] - knee[f, 1], ankle[f, 2] - knee[f, 2]
+        b0, b1, b2 = _cross3(t0, t1, t2, s0, s1, s2)
+        q = grot_hip[f]
+        columns[0, f], columns[1, f], columns[2, f] = _apply3(-q[0], -q[1], -q[2], q[3], b0, b1, b2)
+        columns[3, f] = np.sqrt(_dot3(t0, t1, t2, t0, t1, t2))
+        columns[4, f] = np.sqrt(_dot3(s0, s1, s2, s0, s1, s2))
+    hinge = np.zeros(3)
+    for f in range(frames):  # numpy sums an (F, 3) array's columns one frame after another
+        for c in range(3):
+            hinge[c] += columns[c, f]
+    thigh = _pairwise_sum(columns[3], 0, frames) / frames
+    shin = _pairwise_sum(columns[4], 0, frames) / frames
+    return hinge, thigh, shin
+
+
+@numba.njit(cache=CACHE, nogil=True)
+def knee_poles(grot_hip, hip, ankle, toe, frames, hinge, mode):  # pragma: no cover
+    """The knee's forward direction at ``frames`` ``(N, 3)``: across the hip-ankle line
+    from the hinge axis ``hinge`` in the thigh's frame (``mode`` 0) or from the foot's
+    direction on the floor (``mode`` 1)."""
+    out = np.empty((frames.shape[0], 3))
+    for n in range(frames.shape[0]):
+        f = frames[n]
+        r0, r1, r2 = ankle[f, 0] - hip[f, 0], ankle[f, 1] - hip[f, 1], ankle[f, 2] - hip[f, 2]
+        if mode == 0:
+            q = grot_hip[f]
+            h0, h1, h2 = _apply3(q[0], q[1], q[2], q[3], hinge[0], hinge[1], hinge[2])
+        else:
+            w0, w2 = toe[f, 0] - ankle[f, 0], toe[f, 2] - ankle[f, 2]
+            h0, h1, h2 = _cross3(w0, 0.0, w2, r0, r1, r2)
+        out[n, 0], out[n, 1], out[n, 2] = _cross3(r0, r1, r2, h0, h1, h2)
+    return out
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel for the types the motion core calls
     them with, so that no request pays for it."""
@@ -964,6 +1056,8 @@ def warm() -> None:
     pin_offsets(v, v, np.ones(1, np.bool_), np.zeros(1, np.bool_), 0.0, 0.0, 2, True)
     two_bone_ik(v, v, v, v, v, False, 1e-3, 1e-3)
     one = np.zeros(1, np.int64)
+    knee_hinge(q, v, v, v)
+    knee_poles(q, v, v, v, one, np.zeros(3), 0)
     turn_leg(q[None].copy(), q[None], one, one, one, 0, one, q, q)
     lift_toes(q[None].copy(), q[None], v[None], one, np.zeros(1), 0, 0, 0)
     read_numbers(np.frombuffer(b"1 2.5e-3 x\n", np.uint8), 3)
