@@ -208,11 +208,7 @@ def fk(
             gpos[f, j, 0] = (vx + w * tx + (y * tz - z * ty)) + gpos[f, p, 0]
             gpos[f, j, 1] = (vy + w * ty + (z * tx - x * tz)) + gpos[f, p, 1]
             gpos[f, j, 2] = (vz + w * tz + (x * ty - y * tx)) + gpos[f, p, 2]
-            bx, by, bz, bw = lrot[f, j, 0], lrot[f, j, 1], lrot[f, j, 2], lrot[f, j, 3]
-            grot[f, j, 0] = w * bx + x * bw + y * bz - z * by
-            grot[f, j, 1] = w * by - x * bz + y * bw + z * bx
-            grot[f, j, 2] = w * bz + x * by - y * bx + z * bw
-            grot[f, j, 3] = w * bw - x * bx - y * by - z * bz
+            _product(grot[f, p], lrot[f, j], grot[f], j)
     return grot, gpos
 
 
@@ -227,13 +223,7 @@ def world_rotations(lrot: np.ndarray, parents: np.ndarray, posed: np.ndarray) ->
         for j in range(1, joints):
             if not posed[j]:
                 continue
-            p = parents[j]
-            x, y, z, w = grot[f, p, 0], grot[f, p, 1], grot[f, p, 2], grot[f, p, 3]
-            bx, by, bz, bw = lrot[f, j, 0], lrot[f, j, 1], lrot[f, j, 2], lrot[f, j, 3]
-            grot[f, j, 0] = w * bx + x * bw + y * bz - z * by
-            grot[f, j, 1] = w * by - x * bz + y * bw + z * bx
-            grot[f, j, 2] = w * bz + x * by - y * bx + z * bw
-            grot[f, j, 3] = w * bw - x * bx - y * by - z * bz
+            _product(grot[f, parents[j]], lrot[f, j], grot[f], j)
     return grot
 
 
@@ -264,19 +254,24 @@ def quat_apply(q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:  # pragma
     out[2] = vz + w * tz + (x * ty - y * tx)
 
 
-@numba.guvectorize(["void(f8[:], f8[:])"], "(n)->()", cache=CACHE, nopython=True)
-def norm(v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """Euclidean norms ``(...)`` of vectors ``(..., n)``, summed in the order of numpy's
-    einsum for up to 7 components (even and odd ones apart, then together): the same
-    bits as before."""
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _einsum_dot(a: np.ndarray, b: np.ndarray) -> float:  # pragma: no cover
+    """``a . b`` added as numpy's einsum adds up to 7 components: even and odd ones apart,
+    then together (the same bits as before)."""
     even = 0.0
     odd = 0.0
-    for i in range(0, v.shape[0] - 1, 2):
-        even += v[i] * v[i]
-        odd += v[i + 1] * v[i + 1]
-    if v.shape[0] % 2:
-        even += v[v.shape[0] - 1] * v[v.shape[0] - 1]
-    out[0] = np.sqrt(even + odd)
+    for i in range(0, a.shape[0] - 1, 2):
+        even += a[i] * b[i]
+        odd += a[i + 1] * b[i + 1]
+    if a.shape[0] % 2:
+        even += a[a.shape[0] - 1] * b[a.shape[0] - 1]
+    return even + odd
+
+
+@numba.guvectorize(["void(f8[:], f8[:])"], "(n)->()", cache=CACHE, nopython=True)
+def norm(v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """Euclidean norms ``(...)`` of vectors ``(..., n)``."""
+    out[0] = np.sqrt(_einsum_dot(v, v))
 
 
 @numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->(n)", cache=CACHE, nopython=True)
@@ -780,16 +775,8 @@ def pin_offsets(ankle, toe, ankle_contact, toe_contact, ankle_ground, toe_ground
 
 @numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->()", cache=CACHE, nopython=True)
 def dot(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """Dot products ``(...)`` of vectors ``(..., n)``, added as numpy's einsum adds up to
-    7 components."""
-    even = 0.0
-    odd = 0.0
-    for i in range(0, a.shape[0] - 1, 2):
-        even += a[i] * b[i]
-        odd += a[i + 1] * b[i + 1]
-    if a.shape[0] % 2:
-        even += a[a.shape[0] - 1] * b[a.shape[0] - 1]
-    out[0] = even + odd
+    """Dot products ``(...)`` of vectors ``(..., n)``."""
+    out[0] = _einsum_dot(a, b)
 
 
 @numba.guvectorize(
@@ -845,6 +832,21 @@ def _product(a, b, out, n):  # pragma: no cover
     out[n, 3] = aw * bw - ax * bx - ay * by - az * bz
 
 
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _store_local(lrot, f, j, parent, world, inverse, local):  # pragma: no cover
+    """``lrot[f, j]``: the world rotation ``world`` under its parent's ``parent``, the one
+    of its two quaternions on the side of the old one (the clip stays continuous);
+    ``inverse (4,)`` and ``local (1, 4)`` are scratch."""
+    inverse[0], inverse[1], inverse[2], inverse[3] = -parent[0], -parent[1], -parent[2], parent[3]
+    _product(inverse, world, local, 0)
+    old = lrot[f, j]
+    agree = (local[0, 0] * old[0] + local[0, 2] * old[2]) + (
+        local[0, 1] * old[1] + local[0, 3] * old[3]
+    )
+    for c in range(4):
+        lrot[f, j, c] = -local[0, c] if agree < 0 else local[0, c]
+
+
 @numba.njit(cache=CACHE, nogil=True)
 def turn_leg(
     lrot, grot, parents, thigh_chain, shin_chain, ankle, frames, hip_turn, knee_turn
@@ -873,19 +875,7 @@ def turn_leg(
             for k in range(joints.shape[0]):
                 if joints[k] == p:
                     parent = new[k]
-            inverse[0], inverse[1], inverse[2], inverse[3] = (
-                -parent[0],
-                -parent[1],
-                -parent[2],
-                parent[3],
-            )
-            _product(inverse, new[i], local, 0)
-            old = lrot[f, j]
-            agree = (local[0, 0] * old[0] + local[0, 2] * old[2]) + (
-                local[0, 1] * old[1] + local[0, 3] * old[3]
-            )
-            for c in range(4):
-                lrot[f, j, c] = -local[0, c] if agree < 0 else local[0, c]
+            _store_local(lrot, f, j, parent, new[i], inverse, local)
 
 
 @numba.njit(cache=CACHE, nogil=True)
@@ -975,15 +965,7 @@ def lift_toes(lrot, grot, gpos, frames, lift, parent, ankle, toe):  # pragma: no
         tx, ty, tz, tw = _between3(f0, f1, f2, l0, l1, l2)
         quaternion[0, 0], quaternion[0, 1], quaternion[0, 2], quaternion[0, 3] = tx, ty, tz, tw
         _product(quaternion[0], grot[f, ankle], turned, 0)
-        p = grot[f, parent]
-        inverse[0], inverse[1], inverse[2], inverse[3] = -p[0], -p[1], -p[2], p[3]
-        _product(inverse, turned[0], local, 0)
-        old = lrot[f, ankle]
-        agree = (local[0, 0] * old[0] + local[0, 2] * old[2]) + (
-            local[0, 1] * old[1] + local[0, 3] * old[3]
-        )
-        for c in range(4):
-            lrot[f, ankle, c] = -local[0, c] if agree < 0 else local[0, c]
+        _store_local(lrot, f, ankle, grot[f, parent], turned[0], inverse, local)
 
 
 @numba.njit(cache=CACHE, nogil=True)
