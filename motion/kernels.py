@@ -5,7 +5,10 @@ its per-call cost was most of a short clip's.
 
 Compiled on first use (:func:`warm` at the service's start) and cached on disk beside this
 file, or in ``NUMBA_CACHE_DIR``; where neither is writable they are compiled afresh in
-each process. ``nogil``: the inference pool's threads run them side by side.
+each process. Several processes must not compile into one cache at once (it can be left
+inconsistent, and a process loading it then crashes): ``python -m service`` compiles them
+before it starts its workers. ``nogil``: the inference pool's threads run them side by
+side.
 """
 
 from __future__ import annotations

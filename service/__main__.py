@@ -72,6 +72,12 @@ def main(argv: list[str] | None = None) -> None:
         os.environ[f"MOTION_{key.upper()}"] = str(value)
 
     prepare_metrics_dir(settings.workers)
+    if settings.workers > 1:
+        # compiled once here: workers compiling at once into one numba cache can leave
+        # it inconsistent, and a worker that then loads it crashes
+        from motion import kernels
+
+        kernels.warm()
 
     import uvicorn
 
