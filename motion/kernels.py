@@ -9,6 +9,10 @@ each process. Several processes must not compile into one cache at once (it can 
 inconsistent, and a process loading it then crashes): ``python -m service`` compiles them
 before it starts its workers. ``nogil``: the inference pool's threads run them side by
 side.
+
+About a thousand lines: every loop the motion core compiles is here, beside the inline
+helpers they share (quaternion products, einsum-ordered sums, numpy's pairwise sum), so
+that one module holds what must reproduce numpy's bits and one :func:`warm` compiles it.
 """
 
 from __future__ import annotations
