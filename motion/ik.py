@@ -49,41 +49,8 @@ SWING_CLEARANCE = 0.08
 KNEE_ABSORB = 0.10
 
 
-def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
-    n = rot.norm(v)[..., None]
-    out = v / np.maximum(n, 1e-12)
-    if fallback is not None:
-        out = np.where(n > 1e-12, out, fallback)
-    return out
-
-
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", a, b)[..., None]  # np.sum over a short axis is slow
-
-
-def _perpendicular(v: np.ndarray, hint: np.ndarray | None = None) -> np.ndarray:
-    """A unit vector perpendicular to unit ``v (..., 3)``: ``hint``'s perpendicular part
-    where it has one, else a fixed choice."""
-    seed = np.where(np.abs(v[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
-    out = _unit(seed - _dot(seed, v) * v)
-    if hint is not None:
-        projected = hint - _dot(hint, v) * v
-        big = rot.norm(projected)[..., None] > 1e-9 * np.maximum(rot.norm(hint)[..., None], 1e-300)
-        out = np.where(big, _unit(projected), out)
-    return out
-
-
-def _frame_rotation(u0: np.ndarray, n0: np.ndarray, u1: np.ndarray, n1: np.ndarray) -> np.ndarray:
-    """Rotation ``(..., 4)`` taking direction ``u0`` onto ``u1`` and ``n0`` (made
-    perpendicular to ``u0``) onto ``n1`` (made perpendicular to ``u1``)."""
-
-    def frame(u, n):
-        x = _unit(u)
-        y = _unit(n - _dot(n, x) * x, _perpendicular(x))
-        return np.stack([x, y, rot.cross(x, y)], axis=-1)  # columns
-
-    m = frame(u1, n1) @ np.swapaxes(frame(u0, n0), -1, -2)
-    return rot.from_matrix(m)
 
 
 class LegSolution(NamedTuple):
