@@ -193,6 +193,49 @@ def format_fixed(values: np.ndarray) -> np.ndarray:
     return out[:k]
 
 
+# Quaternion and 3-vector arithmetic on locals, inlined into every loop below: one
+# formula each, the same as numpy's per-component versions (the same bits).
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _hamilton(ax, ay, az, aw, bx, by, bz, bw):  # pragma: no cover
+    """The Hamilton product ``a * b`` of two quaternions held in locals."""
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _product(a, b, out, n):  # pragma: no cover
+    """``out[n] = a * b`` of quaternions held as arrays ``(4,)``."""
+    out[n, 0], out[n, 1], out[n, 2], out[n, 3] = _hamilton(
+        a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]
+    )
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _apply3(x, y, z, w, v0, v1, v2):  # pragma: no cover
+    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
+    return (
+        v0 + w * t0 + (y * t2 - z * t1),
+        v1 + w * t1 + (z * t0 - x * t2),
+        v2 + w * t2 + (x * t1 - y * t0),
+    )
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _cross3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@numba.njit(cache=CACHE, nogil=True, inline="always")
+def _dot3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
+    return (a0 * b0 + a2 * b2) + a1 * b1  # as numpy's einsum adds them
+
+
 @numba.njit(cache=CACHE, nogil=True)
 def fk(
     lrot: np.ndarray, lpos: np.ndarray, parents: np.ndarray, posed: np.ndarray
@@ -209,12 +252,13 @@ def fk(
             if not posed[j]:
                 continue
             p = parents[j]
-            x, y, z, w = grot[f, p, 0], grot[f, p, 1], grot[f, p, 2], grot[f, p, 3]
-            vx, vy, vz = lpos[f, j, 0], lpos[f, j, 1], lpos[f, j, 2]
-            tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-            gpos[f, j, 0] = (vx + w * tx + (y * tz - z * ty)) + gpos[f, p, 0]
-            gpos[f, j, 1] = (vy + w * ty + (z * tx - x * tz)) + gpos[f, p, 1]
-            gpos[f, j, 2] = (vz + w * tz + (x * ty - y * tx)) + gpos[f, p, 2]
+            q = grot[f, p]
+            v0, v1, v2 = _apply3(
+                q[0], q[1], q[2], q[3], lpos[f, j, 0], lpos[f, j, 1], lpos[f, j, 2]
+            )
+            gpos[f, j, 0] = v0 + gpos[f, p, 0]
+            gpos[f, j, 1] = v1 + gpos[f, p, 1]
+            gpos[f, j, 2] = v2 + gpos[f, p, 2]
             _product(grot[f, p], lrot[f, j], grot[f], j)
     return grot, gpos
 
@@ -241,24 +285,13 @@ def world_rotations(lrot: np.ndarray, parents: np.ndarray, posed: np.ndarray) ->
 @numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->(n)", cache=CACHE, nopython=True)
 def quat_mul(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
     """Hamilton product ``a * b`` of quaternions ``(..., 4)`` (x, y, z, w)."""
-    ax, ay, az, aw = a[0], a[1], a[2], a[3]
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    out[0] = aw * bx + ax * bw + ay * bz - az * by
-    out[1] = aw * by - ax * bz + ay * bw + az * bx
-    out[2] = aw * bz + ax * by - ay * bx + az * bw
-    out[3] = aw * bw - ax * bx - ay * by - az * bz
+    out[0], out[1], out[2], out[3] = _hamilton(a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3])
 
 
 @numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(m)->(m)", cache=CACHE, nopython=True)
 def quat_apply(q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
     """Vectors ``v (..., 3)`` rotated by unit quaternions ``q (..., 4)``."""
-    x, y, z, w = q[0], q[1], q[2], q[3]
-    vx, vy, vz = v[0], v[1], v[2]
-    # v + w t + q_xyz x t with t = 2 q_xyz x v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    out[0] = vx + w * tx + (y * tz - z * ty)
-    out[1] = vy + w * ty + (z * tx - x * tz)
-    out[2] = vz + w * tz + (x * ty - y * tx)
+    out[0], out[1], out[2] = _apply3(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
@@ -284,11 +317,7 @@ def norm(v: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
 @numba.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(n)->(n)", cache=CACHE, nopython=True)
 def cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
     """Cross products ``(..., 3)`` of vectors ``a`` and ``b``."""
-    ax, ay, az = a[0], a[1], a[2]
-    bx, by, bz = b[0], b[1], b[2]
-    out[0] = ay * bz - az * by
-    out[1] = az * bx - ax * bz
-    out[2] = ax * by - ay * bx
+    out[0], out[1], out[2] = _cross3(a[0], a[1], a[2], b[0], b[1], b[2])
 
 
 # Rotation conversions, each the arithmetic of the numpy version it replaced in the same
@@ -424,11 +453,6 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
-def _dot3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
-    return (a0 * b0 + a2 * b2) + a1 * b1  # as numpy's einsum adds them
-
-
-@numba.njit(cache=CACHE, nogil=True, inline="always")
 def _unit3(v0, v1, v2, f0, f1, f2, fallback):  # pragma: no cover
     """``v`` made unit, or ``f`` (with ``fallback``) where ``v`` is about zero."""
     size = np.sqrt(_dot3(v0, v1, v2, v0, v1, v2))
@@ -455,11 +479,6 @@ def _perpendicular3(v0, v1, v2, h0, h1, h2, hinted):  # pragma: no cover
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
-def _cross3(a0, a1, a2, b0, b1, b2):  # pragma: no cover
-    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-
-
-@numba.njit(cache=CACHE, nogil=True, inline="always")
 def _between3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
     """``motion.rotations.between`` of one pair: the shortest arc from ``u`` onto ``v``."""
     u0, u1, u2 = _unit3(u0, u1, u2, 0.0, 0.0, 0.0, False)
@@ -473,16 +492,6 @@ def _between3(u0, u1, u2, v0, v1, v2):  # pragma: no cover
         w = 0.0
     size = np.sqrt((x * x + z * z) + (y * y + w * w))
     return x / size, y / size, z / size, w / size
-
-
-@numba.njit(cache=CACHE, nogil=True, inline="always")
-def _apply3(x, y, z, w, v0, v1, v2):  # pragma: no cover
-    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
-    return (
-        v0 + w * t0 + (y * t2 - z * t1),
-        v1 + w * t1 + (z * t0 - x * t2),
-        v2 + w * t2 + (x * t1 - y * t0),
-    )
 
 
 @numba.njit(cache=CACHE, nogil=True)
@@ -579,10 +588,7 @@ def two_bone_ik(hip, knee, ankle, target, pole, hinted, eps, pole_weight):  # pr
         knee_turn[n, 0], knee_turn[n, 1], knee_turn[n, 2], knee_turn[n, 3] = kx, ky, kz, kw
         k0, k1, k2 = _apply3(hx, hy, hz, hw, th0, th1, th2)
         knee_new[n, 0], knee_new[n, 1], knee_new[n, 2] = h0 + k0, h1 + k1, h2 + k2
-        cx = kw * hx + kx * hw + ky * hz - kz * hy
-        cy = kw * hy - kx * hz + ky * hw + kz * hx
-        cz = kw * hz + kx * hy - ky * hx + kz * hw
-        cw = kw * hw - kx * hx - ky * hy - kz * hz
+        cx, cy, cz, cw = _hamilton(kx, ky, kz, kw, hx, hy, hz, hw)
         a0, a1, a2 = _apply3(cx, cy, cz, cw, sh0, sh1, sh2)
         ankle_new[n, 0], ankle_new[n, 1], ankle_new[n, 2] = (
             knee_new[n, 0] + a0,
@@ -826,17 +832,6 @@ def overlap_add(windows: np.ndarray, starts: np.ndarray, weight: np.ndarray, fra
                 out[start + t, c] += weight[t] * windows[w, c, t]
             total[start + t] += weight[t]
     return out, total
-
-
-@numba.njit(cache=CACHE, nogil=True, inline="always")
-def _product(a, b, out, n):  # pragma: no cover
-    """``out[n] = a * b`` of quaternions held as arrays ``(4,)``."""
-    ax, ay, az, aw = a[0], a[1], a[2], a[3]
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    out[n, 0] = aw * bx + ax * bw + ay * bz - az * by
-    out[n, 1] = aw * by - ax * bz + ay * bw + az * bx
-    out[n, 2] = aw * bz + ax * by - ay * bx + az * bw
-    out[n, 3] = aw * bw - ax * bx - ay * by - az * bz
 
 
 @numba.njit(cache=CACHE, nogil=True, inline="always")
