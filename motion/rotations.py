@@ -1,10 +1,10 @@
 """Quaternion helpers, numpy and ``scipy.spatial.transform.Rotation``.
 
 Quaternions are scipy's order ``(x, y, z, w)`` in arrays of shape ``(..., 4)``.
-Products, vector rotation and norms are compiled generalised ufuncs (``motion.kernels``);
-inverses, Euler angles and matrices are plain broadcasting numpy (they run in the inner
-loops of BVH reading and writing, where scipy's per-call cost dominated); rotation vectors
-go through scipy.
+Products, vector rotation, cross products, norms and slerp are compiled generalised
+ufuncs; Euler angles, matrices and 6D rotations are converted by compiled loops
+(``motion.kernels``, the numpy arithmetic they replaced, the same bits), but for
+``to_euler``'s arctangents, which stay numpy's; rotation vectors go through scipy.
 
 Glossary: ``q`` quaternion, ``v`` 3-vector, ``m`` 3x3 matrix, ``e`` Euler angles
 in degrees with a BVH channel order such as ``"ZXY"`` (intrinsic, i.e.
