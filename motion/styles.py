@@ -18,12 +18,11 @@ def canonical_style(name: str) -> str:
     return STYLE_ALIASES.get(name, name)
 
 
-def taken_from_normal(codes: np.ndarray, names: list[str], gain: float) -> np.ndarray:
-    """Style ``codes (S, D)`` of ``names`` taken ``gain`` times as far from "normal"'s, on
-    the line through it (float32): the codes the translator's names play. Unchanged where
-    no style is called "normal"."""
+def exaggerated(codes: np.ndarray, gains: np.ndarray) -> np.ndarray:
+    """Style ``codes (S, D)`` each taken its ``gains (S,)`` times as far from their centre
+    (the mean code), on the line through it (float32): the codes the translator's names
+    play. A mean of a style's takes' codes lies nearer the centre than its takes do."""
     codes = np.asarray(codes, dtype=np.float32)
-    if "normal" not in names or gain == 1.0:
-        return codes.copy()
-    normal = codes[names.index("normal")]
-    return (normal + np.float32(gain) * (codes - normal)).astype(np.float32)
+    centre = codes.mean(axis=0)
+    gains = np.asarray(gains, dtype=np.float32)[:, None]
+    return (centre + gains * (codes - centre)).astype(np.float32)

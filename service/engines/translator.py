@@ -41,7 +41,7 @@ from motion import features as Fe
 from motion import ik, kernels
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
-from motion.styles import taken_from_normal
+from motion.styles import exaggerated
 from service import limits
 from service.engines import register_engine
 from service.engines.base import Engine
@@ -249,8 +249,8 @@ class TranslatorEngine(Engine):
         self.velocity = [float(v) for v in table["velocity"]]
         self.speed = [float(v) for v in table["speed"]]
         self.index = {name: i for i, name in enumerate(self.style_names)}
-        gain = float(extra.get("named_style_gain", 1.0))  # model_export.translator's
-        self.named_codes = taken_from_normal(self.codes, self.style_names, gain)
+        gains = extra["named_style_gains"]  # model_export.translator's
+        self.named_codes = exaggerated(self.codes, [gains[n] for n in self.style_names])
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
@@ -484,8 +484,8 @@ class TranslatorEngine(Engine):
         return StyleCode(scaled, style.velocity, style.source, style.warnings, style.speed)
 
     def code_of_name(self, name: str) -> StyleCode:
-        """The code of a named style: shipped (or another name of one), taken the model's
-        ``named_style_gain`` from "normal"'s, or registered (``service.registered_styles``;
+        """The code of a named style: shipped (or another name of one), taken its
+        ``named_style_gains`` from the centre of the named codes, or registered (``service.registered_styles``;
         a file read, so called in the inference pool)."""
         i = self.row(name)
         if i is None:
