@@ -52,16 +52,13 @@ TRANSLATOR_ARGS ?=
 train-translator: $(VENV)/.dev
 	$(PY) -m training.translator $(TRANSLATOR_ARGS)
 
-# holden2017 fast style networks, one per translator style, distilled from the shipped
-# translator (its outputs are their targets): the loss network (autoencoder, the
-# projection) first when checkpoints/fast/autoencoder.pt is missing, then the style
-# networks, then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.
-# Extra flags: FAST_AE_ARGS, FAST_STYLE_ARGS="--max-steps 10".
-FAST_AE_ARGS ?= --steps 3600 --stop-after 1606
+# The fast style networks, one per translator style, each distilled from the shipped
+# translator's restyler for that style (training/fast_style.py; CPU, about 35 minutes on 2
+# cores), then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.
+# Extra flags: FAST_STYLE_ARGS="--max-steps 10".
 FAST_STYLE_ARGS ?=
 .PHONY: train-fast export-fast bench-fast show-styles
 train-fast: $(VENV)/.dev
-	$(if $(wildcard checkpoints/fast/autoencoder.pt),,$(PY) -m training.fast_autoencoder $(FAST_AE_ARGS))
 	$(PY) -m training.fast_style --all --threads 1 --jobs 2 $(FAST_STYLE_ARGS)
 
 export-fast: $(VENV)/.dev

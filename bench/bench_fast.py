@@ -1,15 +1,15 @@
-"""Speed of the fast style networks (holden2017): frames per second, network only, for
-240, 960 and 3,840 frames, onnxruntime vs torch eager, measured in one run.
+"""Speed of the fast style networks: frames per second, network only, for 240, 960 and
+3,840 frames, onnxruntime vs torch eager, measured in one run.
 
     python -m bench.bench_fast [--style NAME] [--repeats 20] [--json]
 
-Rows: the style network alone (what the paper's table times: 21,818 frames/s at 240
-frames on a 2017 GPU) and style network + manifold projection (what the service runs).
-The same weights in both runtimes: the shipped ONNX files and, for torch, the checkpoints
-under ``checkpoints/fast/`` when present (else fresh networks of the same size: the speed
-does not depend on the weights). Threads: the service's intra-op setting (all cores) for
-both. Also times the engine's whole numpy + onnxruntime path (features, networks, IK,
-foot clean-up) for the same lengths, without HTTP. Needs torch (a training extra).
+Rows: one style's network (what holden2017's table times: 21,818 frames/s at 240 frames on
+a 2017 GPU). The same weights in both runtimes: the shipped ONNX file and, for torch, the
+checkpoint under ``checkpoints/fast/`` when present (else a fresh network of the same
+size: the speed does not depend on the weights). Threads: the service's intra-op setting
+(all cores) for both. Also times the engine's whole numpy + onnxruntime path (features,
+network, rotations, foot clean-up) for the same lengths, without HTTP. Needs torch (a
+training extra).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import fast_features as FF
+from motion import features as Fe
 
 LENGTHS = (240, 960, 3840)
 REPO = Path(__file__).resolve().parent.parent
@@ -64,45 +64,28 @@ def main(argv: list[str] | None = None) -> dict:
     threads = settings.intra_op_threads
     torch.set_num_threads(threads)
 
-    sessions = {
-        g: create_session(settings.models_dir / entry.graphs[g].file, threads)
-        for g in (graph, "projection")
-    }
+    session = create_session(settings.models_dir / entry.graphs[graph].file, threads)
     ckpt_dir = FC.CHECKPOINTS
     net = FC.StyleNet().eval()
-    ae = FC.Autoencoder().eval()
     if (ckpt_dir / f"style_{style}.pt").exists():
         from model_export.fast import load_style
-        from training.fast_style import load_autoencoder
 
         net, _ = load_style(ckpt_dir / f"style_{style}.pt")
-        ae = load_autoencoder(ckpt_dir / "autoencoder.pt")
 
     rows = []
     rng = np.random.default_rng(0)
     for frames in LENGTHS:
-        x = rng.standard_normal((1, frames, FF.CHANNELS)).astype(np.float32)
+        x = rng.standard_normal((1, Fe.CONTROL_CHANNELS, frames)).astype(np.float32)
         xt = torch.from_numpy(x)
 
         def ort_style(x=x):
-            return sessions[graph].run(None, {"motion": x})[0]
-
-        def ort_both(x=x):
-            y = sessions[graph].run(None, {"motion": x})[0]
-            return sessions["projection"].run(None, {"motion": y})[0]
+            return session.run(None, {"control": x})[0]
 
         def torch_style(xt=xt):
             with torch.inference_mode():
                 return net(xt)
 
-        def torch_both(xt=xt):
-            with torch.inference_mode():
-                return ae(net(xt))
-
-        for what, ort_fn, torch_fn in (
-            ("style network", ort_style, torch_style),
-            ("style + projection", ort_both, torch_both),
-        ):
+        for what, ort_fn, torch_fn in (("style network", ort_style, torch_style),):
             t_ort = timed(ort_fn, args.repeats)
             t_torch = timed(torch_fn, args.repeats)
             rows.append(
@@ -144,7 +127,7 @@ def main(argv: list[str] | None = None) -> dict:
                 f"| {r['ort_over_torch']:.2f}x |"
             )
         print(
-            f"\npaper (holden2017, GTX 660 GPU): {result['paper_fps_240_gpu_2017']:,.0f} frames/s"
+            f"\nholden2017's networks (GTX 660 GPU): {result['paper_fps_240_gpu_2017']:,.0f} frames/s"
             " at 240 frames"
         )
         if engine_rows:
@@ -157,7 +140,7 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 def time_engine(entry, settings, style: str, repeats: int) -> list[dict]:
-    """The engine's ``stylize`` (features, networks, positions, IK, foot clean-up) on a
+    """The engine's ``stylize`` (features, network, rotations, foot clean-up) on a
     canonical walk tiled to each length."""
     from motion import bvh, retarget
     from motion import kinematics as K

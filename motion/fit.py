@@ -1,6 +1,6 @@
 """Fitting joint rotations to target positions: a motion on a skeleton whose joints follow
-``(F, J, 3)`` targets as closely as rigid bones allow (the fast networks' output, marker
-data). Vectorised over frames: each step loops over joints only, the rotation that aims a
+``(F, J, 3)`` targets as closely as rigid bones allow (marker data: Dance with Melody).
+Vectorised over frames: each step loops over joints only, the rotation that aims a
 joint's bones at their targets found for every frame at once (shortest swing, or the best
 rotation of several bones in Horn's quaternion form, solved in closed form).
 
@@ -58,7 +58,7 @@ def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     matrix built from the covariance; that eigenvalue is found by Newton's method on the
     characteristic polynomial from an upper bound, the eigenvector as a column of the
     adjugate. The same rotations as a batched 3x3 SVD (within 1e-8 where well determined)
-    in about a third of the time: the SVD had been half of the fast family's IK fit."""
+    in about a third of the time."""
     h = np.einsum("fki,fkj->ijf", a, b)  # h[i, j] = sum_k a_i b_j, frames last
     (xx, xy, xz), (yx, yy, yz), (zx, zy, zz) = h
     n = np.array([

@@ -1,14 +1,16 @@
-"""The fast family (holden2017): one small transformation network per style name, and the
-loss network's autoencoder as manifold projection, all onnxruntime.
+"""The fast family: one small network per style name, distilled from the translator's
+restyler (``training.fast_style``), onnxruntime only.
 
-A request's canonical clip goes: features (``motion.fast_features``, standardised with the
-bundle's statistics) -> edge padding (``MARGIN`` frames each side, then up to a multiple
-of ``BUCKET`` frames, so onnxruntime sees few shapes and short clips still fill the
-receptive field) -> style network -> projection -> raw features -> global positions (the
-content's root trajectory, so the path is kept exactly) -> joint rotations by
-``motion.fit.fit_positions`` (bone lengths exact, twist from the content) -> feet pinned
-where the content's feet are planted, on the content's floor, and lifted clear of it where
-the content's are in the air (``motion.ik.pin_canonical_feet`` with ``floor_of``).
+A request's canonical clip goes: the translator's features (``motion.features.encode``)
+-> the restyler's input (head, hands, feet and travel about the clip's own mean posture,
+standardised with the bundle's statistics, the translator's) -> mirrored at both ends
+(``MARGIN`` frames, then up to a multiple of ``BUCKET`` frames, so onnxruntime sees few
+shapes and short clips still fill the receptive field) -> the style's network, the whole
+clip in one call -> finished as the translator finishes its own output, at the bundle's
+``strength`` (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far
+from the content's own pose, on the content's root
+trajectory, feet planted where the content's are, on its floor, and clear of it where
+the content's are in the air) -> played at the style's speed.
 """
 
 from __future__ import annotations
@@ -18,21 +20,17 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import canonical as C
-from motion import fast_features as FF
 from motion import features as Fe
-from motion import fit, ik
-from motion import kinematics as K
 from motion.skeleton import Motion
 from service.engines import register_engine
 from service.engines.base import Engine
-from service.engines.translator import MAX_WARP, MIN_WARP
+from service.engines.translator import MAX_WARP, MIN_WARP, pad_mirrored, restyled_motion
 from service.errors import NotFound
 from service.metrics import StageTimer
 from service.pipeline import Clip, Result, Upload, load_clip, write_result
 
 BUCKET = 64  # frames: padded lengths are multiples of this
-MARGIN = 64  # frames of edge padding each side (the networks see about +-60 frames)
+MARGIN = 32  # frames mirrored at each end (the networks see 30 frames either side)
 
 
 def padded_length(frames: int) -> int:
@@ -55,13 +53,15 @@ class StylizeRequest:
 @dataclass
 class FastJob:
     """A prepared stylization: the clip (None for a canonical motion given directly), its
-    canonical motion, features and the padded network input ``(1, T, C)``."""
+    canonical motion and features, the padded network input ``(1, C, T)`` and where the
+    clip starts in it."""
 
     clip: Clip | None
     canon: Motion
     style: str
-    features: FF.Encoded
+    features: Fe.Encoded
     x: np.ndarray
+    offset: int
     foot_cleanup: bool
     time_warp: bool = False
 
@@ -72,14 +72,18 @@ class FastEngine(Engine):
 
     def load_assets(self) -> None:
         extra = self.entry.extra
-        self.stats = FF.FastStats(**{k: v for k, v in self.load_npz(extra["stats"]).items()
-                                     if k in ("mean", "std")})  # fmt: skip
+        arrays = self.load_npz(extra["stats"])
+        kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
+        self.stats = Fe.FeatureStats(
+            {k: arrays[f"{k}_mean"] for k in kinds}, {k: arrays[f"{k}_std"] for k in kinds}
+        )
         self.style_info: dict[str, dict[str, Any]] = {
             name: info for name, info in extra.get("styles", {}).items()
             if info["graph"] in self.sessions
         }  # fmt: skip
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {a: n for a, n in extra.get("aliases", {}).items() if n in self.style_info}
+        self.strength = float(extra["strength"])  # model_export.fast's
 
     def styles(self) -> list[dict[str, Any]]:
         return [
@@ -129,21 +133,19 @@ class FastEngine(Engine):
             raise self.refusal(StylizeRequest(Upload("content"), style))
         style = self.style_of(style)
         with timer.stage("features"):
-            features = FF.encode(canon)
-            z = self.stats.normalize(features.features)
-            frames = len(z)
-            after = padded_length(frames) - frames - MARGIN
-            x = np.pad(z, ((MARGIN, after), (0, 0)), mode="edge")[None].astype(np.float32)
-        return FastJob(clip, canon, style, features, x, foot_cleanup)
+            enc = Fe.encode(canon)
+            control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
+            padded, offset = pad_mirrored(control, padded_length(len(control)))
+            x = np.ascontiguousarray(padded.T[None], dtype=np.float32)
+        return FastJob(clip, canon, style, enc, x, offset, foot_cleanup)
 
     def predict(self, job: FastJob, timer: StageTimer) -> np.ndarray:
-        """The style's network, then the autoencoder's projection: ``(1, T, C)``."""
+        """The style's network: ``(1, OUTPUT_CHANNELS, T)``."""
         with timer.stage("network"):
-            styled = self.run(self.style_info[job.style]["graph"], {"motion": job.x})[0]
-            return self.run("projection", {"motion": styled})[0]
+            return self.run(self.style_info[job.style]["graph"], {"control": job.x})[0]
 
-    def finish(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Result:
-        motion = self._motion(job, projected, timer)
+    def finish(self, job: FastJob, output: np.ndarray, timer: StageTimer) -> Result:
+        motion = self._motion(job, output, timer)
         factor = self.warp_factor(job.style) if job.time_warp else 1.0
         if factor != 1.0:
             with timer.stage("time_warp"):
@@ -157,24 +159,14 @@ class FastEngine(Engine):
         speed = float(self.style_info[style].get("speed") or 1.0)
         return min(max(speed, MIN_WARP), MAX_WARP)
 
-    def _motion(self, job: FastJob, projected: np.ndarray, timer: StageTimer) -> Motion:
-        """The network's features -> a canonical motion: the content's root trajectory,
-        joint rotations fitted to the positions, feet pinned where the content's are, on its
-        floor, and clear of it where the content's are in the air."""
-        canon, enc = job.canon, job.features
-        with timer.stage("positions"):
-            frames = canon.num_frames
-            out = self.stats.denormalize(projected[0, MARGIN : MARGIN + frames])
-            out[:, FF.POSITION_CHANNELS :] = enc.features[:, FF.POSITION_CHANNELS :]
-            gpos, _ = FF.decode(out, enc.start, enc.heading, fps=canon.fps)
-            gpos[:, 0] = K.global_positions(canon.slice(0, 1))[0, 0]
-        with timer.stage("ik"):
-            motion = fit.fit_positions(gpos, C.SKELETON, reference=canon, fps=canon.fps)
-        if job.foot_cleanup:
-            with timer.stage("foot_cleanup"):
-                contacts = enc.features[:, FF.CONTACTS] > 0.5
-                motion = ik.pin_canonical_feet(motion, contacts, floor_of=canon)
-        return motion
+    def _motion(self, job: FastJob, output: np.ndarray, timer: StageTimer) -> Motion:
+        """The network's output -> a canonical motion, as the translator finishes its own
+        at the bundle's ``strength``."""
+        frames = job.canon.num_frames
+        channels = output[0, :, job.offset : job.offset + frames].T
+        return restyled_motion(
+            channels, job.canon, job.features, self.stats, timer, self.strength, job.foot_cleanup
+        )
 
     def stylize(
         self,

@@ -102,6 +102,34 @@ class Transfer:
     warnings: list[str] = field(default_factory=list)
 
 
+def restyled_motion(
+    output: np.ndarray,
+    content: Motion,
+    enc: Fe.Encoded,
+    stats: Fe.FeatureStats,
+    timer: StageTimer,
+    strength: float = 1.0,
+    foot_cleanup: bool = True,
+) -> Motion:
+    """A restyler's standardised output ``(F, OUTPUT_CHANNELS)`` for the canonical
+    ``content`` (encoded as ``enc``) -> the canonical result: smoothed, taken ``strength``
+    of the way from the content's own pose, on the content's root trajectory, feet on its
+    floor (module docstring). The fast networks' output is finished the same way."""
+    with timer.stage("rotations"):
+        output = Fe.unstandardize(output, stats, "output")
+        output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
+        if strength < 1.0:  # part of the way from the content's own pose
+            own = enc.content[:, : Fe.OUTPUT_CHANNELS]
+            output = own + np.float32(strength) * (output - own)
+        motion = Fe.decode_motion(output, content, face=enc.facing)
+    if foot_cleanup:
+        with timer.stage("foot_cleanup"):
+            feet = enc.gpos  # the features' FK: contacts and floor read the content posed once
+            contacts = CT.canonical_foot_contacts(content, positions=feet)
+            motion = ik.pin_canonical_feet(motion, contacts, floor_of=content, floor_positions=feet)
+    return motion
+
+
 def padded_length(frames: int, minimum: int = BUCKET) -> int:
     """The bucket a clip of ``frames`` frames runs at: a multiple of ``BUCKET``, >= ``minimum``."""
     return max(-(-frames // BUCKET) * BUCKET, -(-minimum // BUCKET) * BUCKET)
@@ -426,21 +454,10 @@ class TranslatorEngine(Engine):
         content, enc = job.content, job.features
         with timer.stage("rotations"):
             blended = self._blend(out.decoded, job.length)
-            output = Fe.unstandardize(
-                blended[job.offset : job.offset + content.num_frames], self.stats, "output"
-            )
-            output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
-            if job.strength < 1.0:  # part of the way from the content's own pose
-                own = enc.content[:, : Fe.OUTPUT_CHANNELS]
-                output = own + np.float32(job.strength) * (output - own)
-            motion = Fe.decode_motion(output, content, face=enc.facing)
-        if job.foot_cleanup:
-            with timer.stage("foot_cleanup"):
-                feet = enc.gpos  # the features' FK: contacts and floor read the content posed once
-                contacts = CT.canonical_foot_contacts(content, positions=feet)
-                motion = ik.pin_canonical_feet(
-                    motion, contacts, floor_of=content, floor_positions=feet
-                )
+        output = blended[job.offset : job.offset + content.num_frames]
+        motion = restyled_motion(
+            output, content, enc, self.stats, timer, job.strength, job.foot_cleanup
+        )
         warnings: list[str] = []
         factor = 1.0
         if job.time_warp:
@@ -455,6 +472,19 @@ class TranslatorEngine(Engine):
                 if factor != 1.0:
                     motion = Fe.time_warp(motion, factor)
         return Transfer(motion, factor, warnings)
+
+    def restyler_io(self, content: Motion, code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The restyler's standardised input ``(F, CONTROL_CHANNELS)`` for a canonical clip
+        at 30 fps and its blended output ``(F, OUTPUT_CHANNELS)`` for ``code``: what the
+        fast networks learn to do, one style each (``training.fast_style``)."""
+        timer = StageTimer(self.name)
+        job = TranslatorJob(StyleCode(np.asarray(code, dtype=np.float32), None, "style_name"))
+        self._content_job(job, content, timer)
+        out = self.predict(job, timer)
+        blended = self._blend(out.decoded, job.length)
+        enc = job.features
+        control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
+        return control, blended[job.offset : job.offset + content.num_frames]
 
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:

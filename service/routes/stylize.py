@@ -1,4 +1,4 @@
-"""``POST /v1/stylize``: a content clip in one named style by the fast networks (holden2017)."""
+"""``POST /v1/stylize``: a content clip in one named style by the fast networks (one per style)."""
 
 from __future__ import annotations
 
