@@ -515,8 +515,8 @@ class TranslatorEngine(Engine):
 
     def code_of_name(self, name: str) -> StyleCode:
         """The code of a named style: shipped (or another name of one), taken its
-        ``named_style_gains`` from the centre of the named codes, or registered (``service.registered_styles``;
-        a file read, so called in the inference pool)."""
+        ``named_style_gains`` from the centre of the named codes, or registered
+        (``service.registered_styles``; a file read, so called in the inference pool)."""
         i = self.row(name)
         if i is None:
             if (style := self.registered.lookup(name, self.name, self.version)) is not None:
