@@ -249,6 +249,15 @@ class FeatureStats:
     mean: dict[str, np.ndarray]
     std: dict[str, np.ndarray]
 
+    @staticmethod
+    def from_arrays(arrays) -> FeatureStats:
+        """From a mapping of ``<kind>_mean`` and ``<kind>_std`` arrays (as :func:`save_stats`
+        writes them)."""
+        kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
+        return FeatureStats(
+            {k: arrays[f"{k}_mean"] for k in kinds}, {k: arrays[f"{k}_std"] for k in kinds}
+        )
+
     def get(self, kind: str) -> tuple[np.ndarray, np.ndarray]:
         if kind == "output":
             return self.mean["content"][:OUTPUT_CHANNELS], self.std["content"][:OUTPUT_CHANNELS]
@@ -289,8 +298,7 @@ def save_stats(path: str | Path, stats: FeatureStats) -> None:
 
 def load_stats(path: str | Path) -> FeatureStats:
     with np.load(path) as z:
-        kinds = [k[: -len("_mean")] for k in z.files if k.endswith("_mean")]
-        return FeatureStats({k: z[f"{k}_mean"] for k in kinds}, {k: z[f"{k}_std"] for k in kinds})
+        return FeatureStats.from_arrays({k: z[k] for k in z.files})
 
 
 # --------------------------------------------------------------------------- restyler input

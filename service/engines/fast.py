@@ -8,9 +8,9 @@ standardised with the bundle's statistics, the translator's) -> mirrored at both
 shapes and short clips still fill the receptive field) -> the style's network, the whole
 clip in one call -> finished as the translator finishes its own output, at the bundle's
 ``strength`` (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far
-from the content's own pose, on the content's root
-trajectory, feet planted where the content's are, on its floor, and clear of it where
-the content's are in the air) -> played at the style's speed.
+from the content's own pose, on the content's root trajectory, feet planted where the
+content's are, on its floor, and clear of it where the content's are in the air) ->
+played at the style's speed.
 """
 
 from __future__ import annotations
@@ -72,11 +72,7 @@ class FastEngine(Engine):
 
     def load_assets(self) -> None:
         extra = self.entry.extra
-        arrays = self.load_npz(extra["stats"])
-        kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
-        self.stats = Fe.FeatureStats(
-            {k: arrays[f"{k}_mean"] for k in kinds}, {k: arrays[f"{k}_std"] for k in kinds}
-        )
+        self.stats = Fe.FeatureStats.from_arrays(self.load_npz(extra["stats"]))
         self.style_info: dict[str, dict[str, Any]] = {
             name: info for name, info in extra.get("styles", {}).items()
             if info["graph"] in self.sessions

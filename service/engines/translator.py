@@ -265,11 +265,7 @@ class TranslatorEngine(Engine):
 
     def load_assets(self) -> None:
         extra = self.entry.extra
-        arrays = self.load_npz(extra["stats"])
-        kinds = [k.removesuffix("_mean") for k in arrays if k.endswith("_mean")]
-        self.stats = Fe.FeatureStats(
-            {k: arrays[f"{k}_mean"] for k in kinds}, {k: arrays[f"{k}_std"] for k in kinds}
-        )
+        self.stats = Fe.FeatureStats.from_arrays(self.load_npz(extra["stats"]))
         table = self.load_npz(extra["styles_file"])
         self.style_names = [str(n) for n in table["names"]]
         self.codes = np.asarray(table["codes"], dtype=np.float32)
