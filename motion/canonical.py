@@ -183,3 +183,20 @@ def mirrored(motion: Motion) -> Motion:
     check_motion(motion, "mirroring")
     lpos = np.asarray(motion.lpos)[:, MIRROR_INDEX] * np.array([-1.0, 1.0, 1.0])
     return Motion(motion.skeleton, motion.fps, mirror_rotations(motion.lrot), lpos)
+
+
+def turned(motion: Motion, rate: float, facing: float = 0.0) -> Motion:
+    """A canonical motion turning ``rate`` rad/s more to its left (about +Y) as it goes,
+    and its body facing ``facing`` rad further left of its path: the Hips' rotation is
+    turned by both, its steps on the floor by the turn alone (its height unchanged)."""
+    from motion import rotations as R
+
+    check_motion(motion, "turning")
+    angle = rate * np.arange(motion.num_frames) / motion.fps
+    lrot, lpos = np.array(motion.lrot, dtype=np.float64), np.array(motion.lpos)
+    hips = INDEX["Hips"]
+    lrot[:, hips] = R.mul(R.about_y(angle + facing), lrot[:, hips])
+    steps = np.diff(lpos[:, hips], axis=0) * np.array([1.0, 0.0, 1.0])
+    path = np.cumsum(R.apply(R.about_y(angle[1:]), steps), axis=0)
+    lpos[1:, hips, [0, 2]] = lpos[0, hips, [0, 2]] + path[:, [0, 2]]
+    return Motion(motion.skeleton, motion.fps, lrot, lpos)

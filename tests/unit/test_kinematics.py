@@ -209,6 +209,38 @@ def test_mirrored_motion_is_the_reflection_with_sides_swapped():
     np.testing.assert_allclose(twice.lpos, motion.lpos)
 
 
+def test_turned_turns_the_pose_and_the_steps_by_the_angle_so_far():
+    from scipy.spatial.transform import Rotation
+
+    from motion import canonical as C
+    from motion.skeleton import Motion
+
+    rng = np.random.default_rng(5)
+    frames, rate, facing = 9, 1.5, 0.7
+    lrot = Rotation.random(frames * len(C.JOINTS), random_state=6).as_quat().reshape(frames, -1, 4)
+    lrot[:, 0] = [0.0, 0.0, 0.0, 1.0]  # joint_Root stays on the floor, unturned
+    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
+    lpos[:, 1] = rng.normal(scale=30.0, size=(frames, 3))
+    motion = Motion(C.SKELETON, C.FPS, lrot, lpos)
+    out = C.turned(motion, rate, facing)
+    angle = rate * np.arange(frames) / C.FPS
+    about = [Rotation.from_rotvec([0.0, a, 0.0]) for a in angle]
+    hips = C.INDEX["Hips"]
+    before, after = K.global_positions(motion), K.global_positions(out)
+    for f in range(frames):  # the body about the hips (joint_Root stays): turned by both
+        turn = Rotation.from_rotvec([0.0, angle[f] + facing, 0.0])
+        want = turn.apply(before[f, hips:] - before[f, hips])
+        np.testing.assert_allclose(after[f, hips:] - after[f, hips], want, atol=1e-9)
+    steps_before, steps_after = np.diff(before[:, hips], axis=0), np.diff(after[:, hips], axis=0)
+    for f in range(1, frames):  # each step on the floor turned by the angle at its end
+        want = about[f].apply(steps_before[f - 1] * [1.0, 0.0, 1.0])
+        np.testing.assert_allclose(steps_after[f - 1] * [1.0, 0.0, 1.0], want, atol=1e-9)
+    np.testing.assert_allclose(after[:, hips, 1], before[:, hips, 1])  # heights kept
+    np.testing.assert_allclose(after[0, hips], before[0, hips])
+    unturned = C.turned(motion, 0.0)
+    np.testing.assert_allclose(K.global_positions(unturned), before, atol=1e-9)
+
+
 def test_repose_equals_fk_after_a_joint_turns():
     motion = rigs.load_fixture()
     parents = motion.skeleton.parents
