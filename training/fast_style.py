@@ -7,10 +7,11 @@ translator.
 Each style's network (``training.fast_common.StyleNet``) learns what the translator's
 restyler does for that style's named code: from the same input (the content's head, hands,
 feet and travel about its own mean posture) to the same output (every joint's rotation and
-the hips' height): L1 on the standardised channels, away from a window's ends. The engine then finishes it as the
-translator finishes its own output. The content is every Bandai take and the first
-``DANCE_SECONDS`` of each Dance with Melody take; a style's targets are made in its own
-process (a few seconds: the translator on every clip once).
+the hips' height): L1 on the standardised channels, away from a window's ends. The engine
+then finishes it as the translator finishes its own output. The content is every Bandai
+take and the first ``DANCE_SECONDS`` of each Dance with Melody take, mirrored, and turning
+(:func:`content_motions`); a style's targets are made in its own process (a minute: the
+translator on every clip once).
 
 Why not holden2017's positions, projection and IK fit: docs/translator.md.
 
@@ -32,10 +33,13 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from motion import canonical as C
 from motion import features as Fe
 from training import fast_common as FC
 
 DANCE_SECONDS = 60  # of each Dance with Melody take, in the content
+TURN_RATE = 3.0  # rad/s, standard deviation of the turning variants' rates
+VARIANT_SEED = 1
 EDGE = 20  # frames at each end of a training window left out of the loss (no context there)
 
 
@@ -44,7 +48,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     who = p.add_mutually_exclusive_group(required=True)
     who.add_argument("--style", action="append", help="style name (repeatable)")
     who.add_argument("--all", action="store_true", help="every style of the shipped translator")
-    p.add_argument("--steps", type=int, default=3000, help="steps per style")
+    p.add_argument("--steps", type=int, default=5000, help="steps per style")
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many (smoke)")
     p.add_argument("--batch", type=int, default=16)
     p.add_argument("--window", type=int, default=FC.WINDOW)
@@ -73,6 +77,21 @@ def teacher_clips() -> list:
     return D.load_bandai() + dances
 
 
+def content_motions() -> list:
+    """The canonical motions a style's targets are made from: :func:`teacher_clips`'s, each
+    also mirrored, and each of those once more turning (``TURN_RATE``) and facing off its
+    path (any way) at random: foreign clips turn and step sideways far more than Bandai's
+    takes, and a network trained on those alone followed the translator less well there."""
+    motions = [c.motion for c in teacher_clips()]
+    motions += [C.mirrored(m) for m in motions]
+    rng = np.random.default_rng(VARIANT_SEED)
+    rates = rng.normal(0.0, TURN_RATE, len(motions))
+    facings = rng.uniform(-np.pi, np.pi, len(motions))
+    return motions + [
+        C.turned(m, rate, facing) for m, rate, facing in zip(motions, rates, facings, strict=True)
+    ]
+
+
 def style_names() -> list[str]:
     """The shipped translator's styles."""
     from training.judges import load_engine
@@ -87,7 +106,7 @@ def targets(style: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
 
     engine = load_engine("translator")[0]
     code = engine.code_of_name(style).code
-    pairs = [engine.restyler_io(c.motion, code) for c in teacher_clips()]
+    pairs = [engine.restyler_io(m, code) for m in content_motions()]
     return [x for x, _ in pairs], [y for _, y in pairs]
 
 
