@@ -17,10 +17,6 @@ from motion.errors import MotionError
 from motion.skeleton import Motion, Skeleton
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1, keepdims=True)
-
-
 def _translated_joints(skeleton: Skeleton) -> list[int]:
     """Joints whose translation follows the target: the root, and children of the root
     with position channels (the canonical Hips under its floor root)."""
@@ -188,7 +184,6 @@ def _refine(
 def fit_positions(
     target_gpos: np.ndarray,
     skeleton: Skeleton,
-    reference: Motion | None = None,
     iterations: int = 2,
     fps: float | None = None,
 ) -> Motion:
@@ -198,12 +193,11 @@ def fit_positions(
     bones allow. The root (and a root child with position channels, e.g. the canonical
     Hips) takes its translation from the target. Going down the hierarchy, each joint
     turns by the shortest swing that aims its bone at the target, or, with several
-    bones (pelvis, chest), by the rotation that best aligns them all (:func:`_kabsch`). Twist
-    comes from ``reference``'s local rotations when given (it must have the same
-    skeleton and frame count), else it is zero relative to the rest pose; joints without
-    bones (leaves) keep the reference's rotation or the identity. ``iterations`` sweeps
-    of rigid subtree alignment refine the positions of noisy targets before the final
-    pass. ``fps`` defaults to the reference's, else the canonical 30.
+    bones (pelvis, chest), by the rotation that best aligns them all (:func:`_kabsch`). A
+    single bone's twist is zero relative to the rest pose, and joints without bones
+    (leaves) keep the identity. ``iterations`` sweeps of rigid subtree alignment refine
+    the positions of noisy targets before the final pass. ``fps`` defaults to the
+    canonical 30.
     """
     target_gpos = np.asarray(target_gpos, dtype=np.float64)
     joints = skeleton.num_joints
@@ -216,13 +210,7 @@ def fit_positions(
     frames = len(target_gpos)
     if frames == 0:
         raise MotionError("target positions have no frames")
-    if reference is not None:
-        if reference.skeleton.num_joints != joints or reference.num_frames != frames:
-            raise MotionError("reference motion must have the same joints and frame count")
-        lrot_init = rot.normalize(reference.lrot)
-        fps = reference.fps if fps is None else fps
-    else:
-        lrot_init = rot.identity((frames, joints))
+    lrot_init = rot.identity((frames, joints))
     fps = C.FPS if fps is None else float(fps)
     translated = _translated_joints(skeleton)
 
@@ -240,8 +228,4 @@ def fit_positions(
             if p < 0
             else rot.apply(rot.inv(grot[:, p]), target_gpos[:, j] - gpos[:, p])
         )
-    if reference is not None:
-        lrot = np.where(_dot(lrot, reference.lrot) < 0, -lrot, lrot)
-    else:
-        lrot = rot.make_continuous(lrot)
-    return Motion(skeleton, fps, lrot, lpos)
+    return Motion(skeleton, fps, rot.make_continuous(lrot), lpos)
