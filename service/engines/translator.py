@@ -240,7 +240,8 @@ class TranslatorJob:
     clip: Clip | None = None
     content: Motion | None = None
     features: Fe.Encoded | None = None
-    windows: np.ndarray | None = None  # (N, C, window) standardised content
+    control: np.ndarray | None = None  # (F, C) the restyler's input, standardised
+    windows: np.ndarray | None = None  # (N, C, window) cut from it
     offset: int = 0
     length: int = 0
     x_own: np.ndarray | None = None  # (1, C, T) the content's own style input
@@ -381,6 +382,7 @@ class TranslatorEngine(Engine):
             x_content = Fe.restyler_input(enc.content, enc.style3d, self.stats)
             job.x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
             job.windows, job.offset, job.length = self._windows(x_content, self.window)
+            job.control = x_content
         job.content, job.features = content, enc
 
     def _padded(self, x: np.ndarray) -> tuple[np.ndarray, int]:
@@ -478,9 +480,7 @@ class TranslatorEngine(Engine):
         self._content_job(job, content, timer)
         out = self.predict(job, timer)
         blended = self._blend(out.decoded, job.length)
-        enc = job.features
-        control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
-        return control, blended[job.offset : job.offset + content.num_frames]
+        return job.control, blended[job.offset : job.offset + content.num_frames]
 
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:
