@@ -53,7 +53,7 @@ train-translator: $(VENV)/.dev
 	$(PY) -m training.translator $(TRANSLATOR_ARGS)
 
 # The fast style networks, one per translator style, each distilled from the shipped
-# translator's restyler for that style (training/fast_style.py; CPU, about 35 minutes on 2
+# translator's restyler for that style (training/fast_style.py; CPU, about an hour on 2
 # cores), then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.
 # Extra flags: FAST_STYLE_ARGS="--max-steps 10".
 FAST_STYLE_ARGS ?=
