@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from motion import rotations as R
 from motion.errors import MotionError
 from motion.skeleton import Motion, Skeleton
 
@@ -189,8 +190,6 @@ def turned(motion: Motion, rate: float, facing: float = 0.0) -> Motion:
     """A canonical motion turning ``rate`` rad/s more to its left (about +Y) as it goes,
     and its body facing ``facing`` rad further left of its path: the Hips' rotation is
     turned by both, its steps on the floor by the turn alone (its height unchanged)."""
-    from motion import rotations as R
-
     check_motion(motion, "turning")
     angle = rate * np.arange(motion.num_frames) / motion.fps
     lrot, lpos = np.array(motion.lrot, dtype=np.float64), np.array(motion.lpos)
