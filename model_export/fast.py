@@ -38,8 +38,8 @@ LICENCE = "research and evaluation only (trained on Bandai CC BY-NC 4.0, Dance w
 INPUT, OUTPUT = "control", "output"
 # The networks' output is played this far from the content's own pose (as a transfer's
 # strength): they reproduce the translator's styles and lose some of the content's detail.
-# Development half of the foreign evaluation, 2026-11-26.5: at 1, top-1 88%, content kept
-# 0.832; at 0.9, 83% and 0.862 (every style still at least 40%); at 0.8, 78% and 0.885.
+# Development half of the foreign evaluation, networks 2026-11-26.9: at 1, top-1 90%,
+# content kept 0.841; at 0.9, 86% and 0.870 (the highest top-1 keeping 0.85 or more).
 STRENGTH = 0.9
 
 
