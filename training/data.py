@@ -102,7 +102,8 @@ def _save_cache(path: Path, clips: list[Clip], fingerprint: str) -> None:
         for c in clips
     ]
     lengths = np.array([c.num_frames for c in clips])
-    tmp = path.with_suffix(".tmp.npz")
+    # one temporary file per process: `make train-fast` builds the caches in two at once
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
     np.savez_compressed(
         tmp,
         fingerprint=np.array(fingerprint),

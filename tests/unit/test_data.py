@@ -1,8 +1,9 @@
-"""Training datasets as canonical motions (needs the shared data; skips without it)."""
+"""Training datasets as canonical motions (most tests need the shared data and skip without it)."""
 
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,3 +117,36 @@ def test_a_cache_file_reads_back_without_the_data_it_was_built_from(bandai, tmp_
         np.testing.assert_array_equal(got.root, want.root)
     with pytest.raises(FileNotFoundError):
         data.read_clips(tmp_path / "missing.npz")
+
+
+def _save_a_cache_repeatedly(path: str) -> None:
+    rng = np.random.default_rng(0)
+    clips = [
+        data.Clip(
+            name=f"take{k}",
+            dataset="made-up",
+            take=f"take{k}",
+            lrot=rng.normal(size=(2000, 22, 4)),
+            root=rng.normal(size=(2000, 3)),
+        )
+        for k in range(4)
+    ]
+    for _ in range(6):
+        data._save_cache(Path(path), clips, fingerprint="one")
+
+
+def test_two_processes_building_one_cache_at_once_both_finish(tmp_path):
+    """`make train-fast` trains two styles at once, each process loading the datasets: on
+    a fresh clone both build the same cache file together, and neither may fail."""
+    import multiprocessing
+
+    path = tmp_path / "shared.npz"
+    context = multiprocessing.get_context("spawn")
+    workers = [context.Process(target=_save_a_cache_repeatedly, args=(str(path),)) for _ in "ab"]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join(120)
+    assert [w.exitcode for w in workers] == [0, 0]
+    assert [c.name for c in data.read_clips(path)] == [f"take{k}" for k in range(4)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["shared.npz"]
