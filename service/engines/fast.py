@@ -4,8 +4,8 @@ restyler (``training.fast_style``), onnxruntime only.
 A request's canonical clip goes: the translator's features (``motion.features.encode``)
 -> the restyler's input (head, hands, feet and travel about the clip's own mean posture,
 standardised with the bundle's statistics, the translator's) -> mirrored at both ends
-(``MARGIN`` frames, then up to a multiple of ``BUCKET`` frames, so onnxruntime sees few
-shapes and short clips still fill the receptive field) -> the style's network, the whole
+(as many frames as the networks see either side, then up to a multiple of ``BUCKET``
+frames, so onnxruntime sees few shapes and short clips still fill the receptive field) -> the style's network, the whole
 clip in one call -> finished as the translator finishes its own output, at the bundle's
 ``strength`` (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far
 from the content's own pose, on the content's root trajectory, feet planted where the
@@ -30,12 +30,12 @@ from service.metrics import StageTimer
 from service.pipeline import Clip, Result, Upload, load_clip, write_result
 
 BUCKET = 64  # frames: padded lengths are multiples of this
-MARGIN = 32  # frames mirrored at each end (the networks see 30 frames either side)
 
 
-def padded_length(frames: int) -> int:
-    """Length the networks run at for a clip of ``frames`` frames."""
-    return -(-(frames + 2 * MARGIN) // BUCKET) * BUCKET
+def padded_length(frames: int, margin: int) -> int:
+    """Length the networks run at for a clip of ``frames`` frames, ``margin`` frames
+    mirrored at each end at least."""
+    return -(-(frames + 2 * margin) // BUCKET) * BUCKET
 
 
 @dataclass
@@ -80,6 +80,7 @@ class FastEngine(Engine):
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {a: n for a, n in extra.get("aliases", {}).items() if n in self.style_info}
         self.strength = float(extra["strength"])  # model_export.fast's
+        self.margin = int(extra["receptive_field"])  # frames the networks see either side
 
     def styles(self) -> list[dict[str, Any]]:
         return [
@@ -131,7 +132,7 @@ class FastEngine(Engine):
         with timer.stage("features"):
             enc = Fe.encode(canon)
             control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
-            padded, offset = pad_mirrored(control, padded_length(len(control)))
+            padded, offset = pad_mirrored(control, padded_length(len(control), self.margin))
             x = np.ascontiguousarray(padded.T[None], dtype=np.float32)
         return FastJob(clip, canon, style, enc, x, offset, foot_cleanup)
 
