@@ -5,12 +5,13 @@ A request's canonical clip goes: the translator's features (``motion.features.en
 -> the restyler's input (head, hands, feet and travel about the clip's own mean posture,
 standardised with the bundle's statistics, the translator's) -> mirrored at both ends
 (as many frames as the networks see either side, then up to a multiple of ``BUCKET``
-frames, so onnxruntime sees few shapes and short clips still fill the receptive field) -> the style's network, the whole
-clip in one call -> finished as the translator finishes its own output, at the bundle's
-``strength`` (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far
-from the content's own pose, on the content's root trajectory, feet planted where the
-content's are, on its floor, and clear of it where the content's are in the air) ->
-played at the style's speed.
+frames, so onnxruntime sees few shapes and short clips still fill the receptive field)
+-> the style's network, the whole clip in one call -> finished as the translator finishes
+its own output, at the bundle's ``strength``
+(:func:`service.engines.translator.restyled_motion`: smoothed, taken that far from the
+content's own pose, on the content's root trajectory, feet planted where the content's
+are, on its floor, and clear of it where the content's are in the air) -> played at the
+style's speed.
 """
 
 from __future__ import annotations

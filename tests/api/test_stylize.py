@@ -202,3 +202,21 @@ def test_the_other_names_of_a_style_give_the_same_result(shared_client, walk):
     for alias, style in (("old", "elderly"), ("tired", "exhausted"), ("masculinity", "masculine")):
         assert post(shared_client, walk, alias).text == post(shared_client, walk, style).text
     assert "old" not in {s["name"] for s in shared_client.get("/v1/styles").json()["fast"]}
+
+
+def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, walk):
+    """Each end of a clip is mirrored over as many frames as the bundle says its networks
+    see: fewer and its first and last frames would read zeros."""
+    from service.engines.fast import StylizeRequest
+    from service.metrics import StageTimer
+    from service.pipeline import Upload
+
+    for frames in (3, 40, 60):  # 40 frames padded to 64 would leave 12 at each end
+        source = bvh.dumps(bvh.loads(walk).slice(0, frames)).encode()
+        request = StylizeRequest(Upload("content", data=source, filename="walk.bvh"), STYLES[0])
+        engine = shared_client.app.state.registry.engine_for("fast", request)
+        reach = int(engine.entry.extra["receptive_field"])
+        job = engine.prepare(request, StageTimer(engine.name))
+        clip_frames = job.canon.num_frames
+        assert job.offset >= reach, frames
+        assert job.x.shape[2] - job.offset - clip_frames >= reach, frames
