@@ -60,7 +60,8 @@ relative to the hips in the body's facing frame, the output resampled to the con
 frame count (time warping changes it), centred 3D correlation per effector, averaged; the
 mean and the share at or above 0.85. Foot sliding as ``judges.skating``, beside real
 Bandai mocap and the content unchanged. Baseline: what the judge says of the content
-unchanged.
+unchanged. How far the recognition figures could move with other takes of the same kinds:
+90% intervals with the half's takes resampled (``take_intervals``).
 
 Over 600 lines in one module: the split, the judge, the measures and the report are
 one yardstick; figures compare across sessions only while all of them change together.
@@ -109,6 +110,7 @@ EFFECTORS = [C.INDEX[n] for n in ("Hand_L", "Hand_R", "Foot_L", "Foot_R")]
 KEPT = 0.85  # content-kept correlation counted as kept
 PINNED_JUDGE = REPO / "training" / "foreign_judge.pt"  # the yardstick, committed
 CHECK_TAKES = 6  # real takes a pinned judge re-judges when loaded
+RESAMPLES = 2000  # bootstrap draws of a half's takes for the figures' intervals
 ACTOR_GROUPS = (
     ("active", "elderly", "exhausted"),
     ("feminine", "youthful"),
@@ -585,6 +587,36 @@ def _stylize(engine, canon: Motion, style: str) -> Motion:
 ADAPTERS = {"translator": _translate, "fast": _stylize}
 
 
+def take_intervals(
+    takes: list[str], requested: list[str], predicted: list[str], resamples: int = RESAMPLES
+) -> dict[str, list[float]]:
+    """90% intervals (5th and 95th percentiles) of top-1, the most-predicted style's share
+    and the lowest recall of a requested style, over ``resamples`` draws of the half's takes
+    with replacement (seeded). A take's segments and rig variants are judged together and
+    fare alike, so it is takes, not outputs, that the figures vary with."""
+    rows: dict[str, list[int]] = {}
+    for i, take in enumerate(takes):
+        rows.setdefault(take, []).append(i)
+    groups = list(rows.values())
+    classes = sorted(set(requested) | set(predicted))
+    asked = np.array([classes.index(r) for r in requested])
+    said = np.array([classes.index(p) for p in predicted])
+    hits = asked == said
+    rng = np.random.default_rng(0)
+    draws: dict[str, list[float]] = {"top1": [], "most_predicted_share": [], "lowest_recall": []}
+    for _ in range(resamples):
+        idx = np.concatenate([groups[k] for k in rng.integers(len(groups), size=len(groups))])
+        draws["top1"].append(hits[idx].mean())
+        draws["most_predicted_share"].append(np.bincount(said[idx]).max() / len(idx))
+        n = np.bincount(asked[idx], minlength=len(classes))
+        right = np.bincount(asked[idx], weights=hits[idx], minlength=len(classes))
+        draws["lowest_recall"].append((right[n > 0] / n[n > 0]).min())
+    return {
+        k: [round(float(np.percentile(v, 5)), 4), round(float(np.percentile(v, 95)), 4)]
+        for k, v in draws.items()
+    }
+
+
 @dataclass
 class Output:
     """One item sent to one shipped style name, as the judge and the measures see it."""
@@ -635,6 +667,9 @@ def family_figures(outputs: list[Output], classes: list[str], real: RealBandai) 
         by_name.setdefault(o.name, []).append(hits[i])
         by_source.setdefault(o.item.source, []).append(i)
     figures["top1_by_name"] = {n: _share(v) for n, v in sorted(by_name.items())}
+    figures["intervals_90"] = take_intervals(
+        [o.item.take for o in outputs], [o.style for o in outputs], predicted
+    )
     figures["by_source"] = {
         source: {
             "n": len(rows),
@@ -816,6 +851,11 @@ def markdown(report: dict) -> str:
         "-",
         f"{len(ref['under_30'])} / {len(ref['under_10'])}",
     )
+
+    def intervals(v: dict) -> str:
+        return "; ".join(f"{lo:.0%}-{hi:.0%}" for lo, hi in v["intervals_90"].values())
+
+    row("90% intervals, takes resampled: top-1; most-predicted; lowest recall", intervals, "-", "-")
     row("spread / real", lambda v: f"{v['spread_ratio']:.2f}", "-", f"1 ({real['spread']:.2f})")
     row(
         f"content kept: corr; share >= {KEPT}",
@@ -915,6 +955,7 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "content_kept",
         "content_kept_share",
         "foot_sliding_cm_s",
+        "intervals_90",
     )
     real = report["real_bandai"]
     for figures in report["families"].values():

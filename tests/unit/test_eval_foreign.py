@@ -301,3 +301,20 @@ def test_a_pinned_judge_reads_back_the_same_and_refuses_changed_features(tmp_pat
     with pytest.raises(ValueError, match="judges take b differently"):
         EF.pinned_judge(path, [clips[0], replace(faster, content="walk")])
     assert EF.judge_for(clips, None, path).classes == judge.classes  # the file, not training
+
+
+def test_intervals_resample_takes_not_outputs():
+    """Two takes of three outputs each: one take all right, the other all wrong. Drawn by
+    take, some resamples hold only the one or only the other, so top-1 runs from 0 to 1;
+    the same six outputs in six takes of their own could not stray so far."""
+    requested = ["a", "b", "c", "a", "b", "c"]
+    predicted = ["a", "b", "c", "b", "c", "a"]
+    by_take = EF.take_intervals(["t1"] * 3 + ["t2"] * 3, requested, predicted, resamples=400)
+    assert by_take["top1"] == [0.0, 1.0]
+    assert by_take["lowest_recall"][0] == 0.0
+    apart = EF.take_intervals([f"t{k}" for k in range(6)], requested, predicted, resamples=400)
+    assert 0.0 < apart["top1"][0] <= 0.5 <= apart["top1"][1] < 1.0
+    everything_right = EF.take_intervals(["t1", "t1", "t2"], ["a", "b", "a"], ["a", "b", "a"])
+    assert everything_right["top1"] == [1.0, 1.0]
+    assert everything_right["lowest_recall"] == [1.0, 1.0]
+    assert 0.5 <= everything_right["most_predicted_share"][0] <= 1.0
