@@ -25,18 +25,17 @@ from motion import features as Fe
 from motion.skeleton import Motion
 from service.engines import register_engine
 from service.engines.base import Engine
-from service.engines.translator import MAX_WARP, MIN_WARP, pad_mirrored, restyled_motion
+from service.engines.translator import (
+    BUCKET,
+    MAX_WARP,
+    MIN_WARP,
+    pad_mirrored,
+    padded_length,
+    restyled_motion,
+)
 from service.errors import NotFound
 from service.metrics import StageTimer
 from service.pipeline import Clip, Result, Upload, load_clip, write_result
-
-BUCKET = 64  # frames: padded lengths are multiples of this
-
-
-def padded_length(frames: int, margin: int) -> int:
-    """Length the networks run at for a clip of ``frames`` frames, ``margin`` frames
-    mirrored at each end at least."""
-    return -(-(frames + 2 * margin) // BUCKET) * BUCKET
 
 
 @dataclass
@@ -133,7 +132,7 @@ class FastEngine(Engine):
         with timer.stage("features"):
             enc = Fe.encode(canon)
             control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
-            padded, offset = pad_mirrored(control, padded_length(len(control), self.margin))
+            padded, offset = pad_mirrored(control, padded_length(len(control) + 2 * self.margin))
             x = np.ascontiguousarray(padded.T[None], dtype=np.float32)
         return FastJob(clip, canon, style, enc, x, offset, foot_cleanup)
 
