@@ -106,8 +106,8 @@ def targets(style: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
 
     engine = load_engine("translator")[0]
     code = engine.code_of_name(style).code
-    pairs = [engine.restyler_io(m, code) for m in content_motions()]
-    return [x for x, _ in pairs], [y for _, y in pairs]
+    controls = [engine.restyler_input(m) for m in content_motions()]
+    return controls, [engine.restyled(x, code) for x in controls]
 
 
 class StyleTrainer:

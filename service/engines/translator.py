@@ -421,14 +421,20 @@ class TranslatorEngine(Engine):
             if job.windows is None:
                 return Networks(style)
             own = self.run("style3d", {"motion3d": job.x_own})[0][0]
-        target = np.asarray(style.code, dtype=np.float32).reshape(1, -1)
         with timer.stage("decode"):
-            decoded = []
-            for i in range(0, len(job.windows), WINDOWS_PER_CALL):
-                windows = job.windows[i : i + WINDOWS_PER_CALL]
-                codes = np.repeat(target, len(windows), 0)
-                decoded.append(self.run("restyler", {"content": windows, "style_code": codes})[0])
-        return Networks(style, own, np.concatenate(decoded))
+            decoded = self._decoded(job.windows, style.code)
+        return Networks(style, own, decoded)
+
+    def _decoded(self, windows: np.ndarray, code: np.ndarray) -> np.ndarray:
+        """The restyler on content windows ``(N, C, length)`` for one code, in calls of at
+        most :data:`WINDOWS_PER_CALL` windows."""
+        target = np.asarray(code, dtype=np.float32).reshape(1, -1)
+        decoded = []
+        for i in range(0, len(windows), WINDOWS_PER_CALL):
+            part = windows[i : i + WINDOWS_PER_CALL]
+            codes = np.repeat(target, len(part), 0)
+            decoded.append(self.run("restyler", {"content": part, "style_code": codes})[0])
+        return np.concatenate(decoded)
 
     # --- finish ----------------------------------------------------------------------------
 
@@ -474,16 +480,19 @@ class TranslatorEngine(Engine):
                     motion = Fe.time_warp(motion, factor)
         return Transfer(motion, factor, warnings)
 
-    def restyler_io(self, content: Motion, code: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def restyler_input(self, content: Motion) -> np.ndarray:
         """The restyler's standardised input ``(F, CONTROL_CHANNELS)`` for a canonical clip
-        at 30 fps and its blended output ``(F, OUTPUT_CHANNELS)`` for ``code``: what the
-        fast networks learn to do, one style each (``training.fast_style``)."""
-        timer = StageTimer(self.name)
-        job = TranslatorJob(StyleCode(np.asarray(code, dtype=np.float32), None, "style_name"))
-        self._content_job(job, content, timer)
-        out = self.predict(job, timer)
-        blended = self._blend(out.decoded, job.length)
-        return job.control, blended[job.offset : job.offset + content.num_frames]
+        at 30 fps: with :meth:`restyled`, what the fast networks learn to do, one style
+        each (``training.fast_style``)."""
+        enc = Fe.encode(content)
+        return Fe.restyler_input(enc.content, enc.style3d, self.stats)
+
+    def restyled(self, control: np.ndarray, code: np.ndarray) -> np.ndarray:
+        """The restyler's blended output ``(F, OUTPUT_CHANNELS)`` for a standardised input
+        ``control (F, CONTROL_CHANNELS)`` and ``code``, run as :meth:`predict` runs it."""
+        windows, offset, length = self._windows(control, self.window)
+        blended = self._blend(self._decoded(windows, code), length)
+        return blended[offset : offset + len(control)]
 
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:

@@ -80,3 +80,26 @@ def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
         models / teacher.extra["stats"]
     ).read_bytes()
     assert "research and evaluation only" in entry.licence
+
+
+def test_the_targets_are_what_a_transfer_decodes():
+    """The fast networks learn ``restyled(restyler_input(clip))``: exactly the restyler's
+    blended output the translator's own transfer path makes for the clip and code."""
+    from motion import bvh, retarget
+    from service.engines.translator import StyleCode, TranslatorJob
+    from service.metrics import StageTimer
+    from tests.rigs import FIXTURE
+    from training.judges import load_engine
+
+    engine = load_engine("translator")[0]
+    clip = retarget.to_canonical(bvh.load(FIXTURE))
+    code = engine.code_of_name("angry").code
+    job = TranslatorJob(StyleCode(np.asarray(code, dtype=np.float32), None, "style_name"))
+    timer = StageTimer(engine.name)
+    engine._content_job(job, clip, timer)
+    decoded = engine._blend(engine.predict(job, timer).decoded, job.length)
+    control = engine.restyler_input(clip)
+    np.testing.assert_array_equal(control, job.control)
+    np.testing.assert_array_equal(
+        engine.restyled(control, code), decoded[job.offset : job.offset + clip.num_frames]
+    )
