@@ -34,8 +34,12 @@ def test_receptive_field_is_what_the_network_sees():
 
 
 def test_export_parity(tmp_path):
-    """Exported graphs: symbolic batch/time, and onnxruntime equals torch (rtol 1e-4) at
-    T = 32, 100, 241 and batch 1 and 3, in a single file."""
+    """Exported graphs: symbolic batch/time, weights stored as float16, and onnxruntime
+    equals torch with its weights rounded as stored (rtol 1e-4) at T = 32, 100, 241 and
+    batch 1 and 3, in a single file."""
+    import onnx
+    from onnx import numpy_helper
+
     from model_export import fast as X
 
     assert {(b, t) for b, t in X.PARITY_SHAPES} == {(b, t) for b in (1, 3) for t in (32, 100, 241)}
@@ -43,8 +47,25 @@ def test_export_parity(tmp_path):
     net = FC.StyleNet().eval()
     path = tmp_path / "style.onnx"
     X.export_graph(net, path)
-    assert X.parity(net, path) < 1e-3
+    assert X.parity(X.halved(net), path) < 1e-3
     assert not list(tmp_path.glob("*.data"))
+    weights = [numpy_helper.to_array(w) for w in onnx.load(str(path)).graph.initializer]
+    stored = sum(w.size for w in weights if w.dtype == np.float16)
+    assert stored == sum(p.numel() for p in net.parameters())
+    assert path.stat().st_size < 2.2 * stored
+
+
+def test_parity_tells_rounded_weights_from_the_originals(tmp_path):
+    """The float16 graph differs from the unrounded network by more than the parity check
+    allows, so the check compares like with like."""
+    from model_export import fast as X
+
+    torch.manual_seed(0)
+    net = FC.StyleNet().eval()
+    path = tmp_path / "style.onnx"
+    X.export_graph(net, path)
+    with pytest.raises(RuntimeError, match="parity fails"):
+        X.parity(net, path)
 
 
 def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
