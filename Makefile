@@ -52,6 +52,12 @@ TRANSLATOR_ARGS ?=
 train-translator: $(VENV)/.dev
 	$(PY) -m training.translator $(TRANSLATOR_ARGS)
 
+# What a lent GPU machine needs to train the translator without the data folder, in
+# cache/carry/ (13 MB: Bandai with float16 rotations, the pair alignments; training/carry.py).
+.PHONY: carry-translator
+carry-translator: $(VENV)/.dev
+	$(PY) -m training.carry
+
 # The fast style networks, one per translator style, each distilled from the shipped
 # translator's restyler for that style (training/fast_style.py; CPU, about an hour on 2
 # cores), then ONNX + manifest entry "fast-bandai" with export-fast. Logs in runs/fast/.

@@ -1,0 +1,47 @@
+"""What a lent GPU machine needs to train the translator, small enough to carry there.
+
+    python -m training.carry [--out cache/carry]
+
+A lent machine receives the working tree and at most 64 MiB in all, and no data folder.
+This writes into ``--out`` (ignored by git, as all of ``cache/``) Bandai's takes with their
+rotations stored as float16 (``bandai.npz``, 12 MB against 25 MB) and the pair alignments
+(``translator_alignments.npz``), so that there
+
+    MOTION_CACHE_DIR=cache/carry python -m training.translator.fit \\
+        --clips cache/carry/bandai.npz --device cuda ...
+
+trains without the data folder or librosa. Name ``cache/carry`` in the run's ``carry``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+from pathlib import Path
+
+from training import data as D
+from training.translator.fit import REPO
+
+ALIGNMENTS = "translator_alignments.npz"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=REPO / "cache" / "carry")
+    args = parser.parse_args(argv)
+    alignments = D.cache_dir() / ALIGNMENTS
+    if not alignments.exists():
+        raise SystemExit(
+            f"{alignments} is missing: run `make train-translator` here first "
+            "(it computes every pair's alignment in its first minute)"
+        )
+    args.out.mkdir(parents=True, exist_ok=True)
+    D.save_clips(args.out / "bandai.npz", D.load_bandai(), "carried", half=True)
+    shutil.copyfile(alignments, args.out / ALIGNMENTS)
+    for p in sorted(args.out.iterdir()):
+        print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
