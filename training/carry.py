@@ -20,14 +20,13 @@ import shutil
 from pathlib import Path
 
 from training import data as D
-from training.translator.fit import REPO
 
 ALIGNMENTS = "translator_alignments.npz"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=REPO / "cache" / "carry")
+    parser.add_argument("--out", type=Path, default=D.REPO / "cache" / "carry")
     args = parser.parse_args(argv)
     alignments = D.cache_dir() / ALIGNMENTS
     if not alignments.exists():
