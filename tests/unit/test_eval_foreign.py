@@ -235,9 +235,9 @@ def test_a_cached_judge_is_kept_for_the_same_code_and_motion_and_only_for_them()
 
 
 def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch):
-    """:func:`evaluate` with both shipped families on one item of the test half and a judge
-    trained a few steps (a full run's took 51 minutes on two busy cores), its tables and its
-    record."""
+    """:func:`evaluate` with both shipped families (the translator also by style clips) on
+    one item of the test half and a judge trained a few steps (a full run's took 51 minutes
+    on two busy cores), its tables and its records."""
     import shutil
 
     from service.config import Settings
@@ -265,9 +265,9 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     models = tmp_path / "models"
     shutil.copytree(Settings().models_dir, models)
     EF.record_in_manifest(report, models)
-    for figures in report["families"].values():
+    for family, figures in report["families"].items():
         entry = next(m for m in load_manifest(models).models if m.name == figures["model_name"])
-        recorded = entry.metrics["evaluation"]["foreign_test_half"]
+        recorded = entry.metrics["evaluation"][EF.EVALUATION_KEY.get(family, "foreign_test_half")]
         assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
     with pytest.raises(ValueError, match="test half"):
         EF.record_in_manifest({**report, "half": "dev"}, models)
