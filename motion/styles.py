@@ -18,11 +18,14 @@ def canonical_style(name: str) -> str:
     return STYLE_ALIASES.get(name, name)
 
 
-def exaggerated(codes: np.ndarray, gains: np.ndarray) -> np.ndarray:
-    """Style ``codes (S, D)`` each taken its ``gains (S,)`` times as far from their centre
-    (the mean code), on the line through it (float32): the codes the translator's names
-    play. A mean of a style's takes' codes lies nearer the centre than its takes do."""
+def exaggerated(
+    codes: np.ndarray, gains: np.ndarray, centre: np.ndarray | None = None
+) -> np.ndarray:
+    """Style ``codes (S, D)`` each taken its ``gains (S,)`` times as far from ``centre``
+    (default their mean), on the line through it (float32): the codes the translator's
+    names and style clips play. A mean of a style's takes' codes lies nearer the centre
+    than its takes do, and an encoder's code of one clip nearer than the clip's style."""
     codes = np.asarray(codes, dtype=np.float32)
-    centre = codes.mean(axis=0)
+    centre = codes.mean(axis=0) if centre is None else np.asarray(centre, dtype=np.float32)
     gains = np.asarray(gains, dtype=np.float32)[:, None]
     return (centre + gains * (codes - centre)).astype(np.float32)

@@ -596,8 +596,8 @@ class ByStyleClip:
     for each item and style, one of the style's Bandai takes, picked by a hash of the item
     (its rig variants get the same) and the take, so a half's items spread over the style's
     actions and performers. Its code is the 3D encoder's (``code_of_motion``, bounded as the
-    service bounds a clip's) and the time warp the paper's ratio of velocity factors, as
-    ``POST /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in
+    service bounds a clip's) as the restyler plays it (``played``), and the time warp the
+    paper's ratio of velocity factors, as ``POST /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in
     ten of dataset 2's): a user's own clip of a style may carry it less."""
 
     def __init__(self, clips: list) -> None:

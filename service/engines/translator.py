@@ -279,6 +279,8 @@ class TranslatorEngine(Engine):
         self.index = {name: i for i, name in enumerate(self.style_names)}
         gains = extra["named_style_gains"]  # model_export.translator's
         self.named_codes = exaggerated(self.codes, [gains[n] for n in self.style_names])
+        # a style clip's code plays as far out as a name's (older exports: as encoded)
+        self.clip_style_gain = float(extra.get("clip_style_gain", 1.0))
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
@@ -422,7 +424,8 @@ class TranslatorEngine(Engine):
                 return Networks(style)
             own = self.run("style3d", {"motion3d": job.x_own})[0][0]
         with timer.stage("decode"):
-            decoded = self._decoded(job.windows, style.code)
+            played = self.played(style.code) if style.source == "style" else style.code
+            decoded = self._decoded(job.windows, played)
         return Networks(style, own, decoded)
 
     def _decoded(self, windows: np.ndarray, code: np.ndarray) -> np.ndarray:
@@ -528,7 +531,8 @@ class TranslatorEngine(Engine):
         i = self.row(name)
         if i is None:
             if (style := self.registered.lookup(name, self.name, self.version)) is not None:
-                return StyleCode(style.code.copy(), style.velocity, "style_name", speed=style.speed)
+                code = self.played(style.code)  # the mean code of its clips
+                return StyleCode(code, style.velocity, "style_name", speed=style.speed)
             raise self._unknown(name)
         code = self.named_codes[i].copy()
         return StyleCode(code, self.velocity[i], "style_name", speed=self.speed[i])
@@ -544,8 +548,17 @@ class TranslatorEngine(Engine):
         speed = float(np.exp(np.dot(weights, np.log([s.speed for s in styles]))))
         return StyleCode(code.astype(np.float32), velocity, "style_mix", speed=speed)
 
+    def played(self, code: np.ndarray) -> np.ndarray:
+        """The code a style clip (or a style registered from clips) plays:
+        ``clip_style_gain`` times as far from the centre of the learned codes as the encoder
+        gives it, as a name's is taken out (model_export.translator's ``CLIP_STYLE_GAIN``).
+        What ``/v1/style-code`` reports and registration stores is the code as encoded."""
+        centre = self.codes.mean(axis=0)
+        return exaggerated(np.asarray(code)[None], [self.clip_style_gain], centre)[0]
+
     def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
-        """The 3D style code and velocity factor of a canonical clip at 30 fps."""
+        """The 3D style code (as encoded; it plays as :meth:`played`) and velocity factor
+        of a canonical clip at 30 fps."""
         timer = timer or StageTimer(self.name)
         return self.predict(self._motion_job(canon, timer), timer).style
 
