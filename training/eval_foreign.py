@@ -597,8 +597,9 @@ class ByStyleClip:
     (its rig variants get the same) and the take, so a half's items spread over the style's
     actions and performers. Its code is the 3D encoder's (``code_of_motion``, bounded as the
     service bounds a clip's) as the restyler plays it (``played``), and the time warp the
-    paper's ratio of velocity factors, as ``POST /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in
-    ten of dataset 2's): a user's own clip of a style may carry it less."""
+    paper's ratio of velocity factors, as ``POST /v1/transfer`` runs a style clip. The
+    encoder trained on these takes (but one in ten of dataset 2's): a user's own clip of a
+    style may carry it less."""
 
     def __init__(self, clips: list) -> None:
         from training.data import clip_motion
