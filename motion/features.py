@@ -179,14 +179,20 @@ def style2d_from_keypoints(kp: keypoints.Keypoints2D) -> np.ndarray:
     return _style2d_from_normalized(_resample_positions(normalized, kp.fps))
 
 
-def style2d_from_positions(gpos: np.ndarray, yaw: float = 0.0, scale: float = 1.0) -> np.ndarray:
-    """2D style input ``(F, STYLE2D_CHANNELS)`` of 3D motion ``gpos (F, 22, 3)`` at 30 fps, seen
-    through ``project_2d(gpos, yaw, scale)`` and normalised exactly as real keypoints are
-    (they are wrapped in a ``Keypoints2D`` with the observed joints of OpenPose BODY_25)."""
+def keypoints_of_positions(
+    gpos: np.ndarray, yaw: float = 0.0, scale: float = 1.0
+) -> keypoints.Keypoints2D:
+    """3D motion ``gpos (F, 22, 3)`` at 30 fps as a video's keypoints: seen through
+    ``project_2d(gpos, yaw, scale)``, with the joints OpenPose BODY_25 observes."""
     projected = project_2d(gpos, yaw, scale)
     confidence = np.broadcast_to(_OBSERVED_2D.astype(np.float64), projected.shape[:2])
-    kp = keypoints.Keypoints2D(projected, confidence, _OBSERVED_2D, FPS, "projection")
-    return style2d_from_keypoints(kp)
+    return keypoints.Keypoints2D(projected, confidence, _OBSERVED_2D, FPS, "projection")
+
+
+def style2d_from_positions(gpos: np.ndarray, yaw: float = 0.0, scale: float = 1.0) -> np.ndarray:
+    """2D style input ``(F, STYLE2D_CHANNELS)`` of 3D motion ``gpos (F, 22, 3)`` at 30 fps,
+    normalised exactly as real keypoints are (:func:`keypoints_of_positions`)."""
+    return style2d_from_keypoints(keypoints_of_positions(gpos, yaw, scale))
 
 
 # --------------------------------------------------------------------------- decoding

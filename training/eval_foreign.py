@@ -48,10 +48,11 @@ figures measure it: over held-out dataset-2 clips of a group of styles one actor
 performed, how often the judge, restricted to that group's styles, names the right one. A
 judge that read the actor would be at chance there.
 
-Families: the translator by style name, the fast networks, and ``translator-clip``: the
+Families: the translator by style name, the fast networks, ``translator-clip``: the
 translator with one real Bandai take of the requested style as the style clip
-(:class:`ByStyleClip`), recorded in the translator's manifest entry as
-``foreign_test_half_style_clips``.
+(:class:`ByStyleClip`), and ``translator-video``: with a side view of such a take as the
+video's keypoints (:class:`ByStyleVideo`); the last two recorded in the translator's
+manifest entry as ``foreign_test_half_style_clips`` and ``foreign_test_half_style_videos``.
 
 Figures per family and half, against the merged requested style: top-1, top-3, recall per
 style and per shipped name, the share of the most-predicted style, confusion counts. Spread
@@ -106,9 +107,13 @@ from training.judges import (
 
 REPO = Path(__file__).resolve().parent.parent
 FOLDERS = ("cmu-31", "xia", "cmu-dance-43", "cmu-dance-3dsmax")
-FAMILIES = ("translator", "fast", "translator-clip")
-ENGINE_OF = {"translator-clip": "translator"}  # a family measured through another's engine
-EVALUATION_KEY = {"translator-clip": "foreign_test_half_style_clips"}  # manifest records
+FAMILIES = ("translator", "fast", "translator-clip", "translator-video")
+# families measured through another's engine, and where their test half is recorded
+ENGINE_OF = {"translator-clip": "translator", "translator-video": "translator"}
+EVALUATION_KEY = {
+    "translator-clip": "foreign_test_half_style_clips",
+    "translator-video": "foreign_test_half_style_videos",
+}
 HALVES = ("dev", "test")
 SEGMENT_FRAMES = 240  # 8 s at 30 fps
 MAX_SEGMENTS = 4
@@ -626,6 +631,25 @@ class ByStyleClip:
         ).motion
 
 
+class ByStyleVideo(ByStyleClip):
+    """The translator with a video of the style: the take :class:`ByStyleClip` picks, seen
+    from one side (yaw uniform in +-90 degrees, as training projects its views, seeded by
+    the take: one video per take) as the joints OpenPose observes
+    (``keypoints_of_positions``), through the service's keypoint path
+    (``code_of_keypoints``; no time warp). Projected mocap is a video without a
+    tracker's noise: real videos may carry a style less."""
+
+    def __call__(self, engine, item: Item, style: str) -> Motion:
+        take = self.take_for(item, style)
+        if take.name not in self.codes:
+            seed = zlib.crc32(f"{take.name}|view".encode())
+            yaw = np.deg2rad(np.random.default_rng(seed).uniform(-90.0, 90.0))
+            gpos = K.global_positions(self.motion(take))
+            self.codes[take.name] = engine.code_of_keypoints(Fe.keypoints_of_positions(gpos, yaw))
+        code = self.codes[take.name]
+        return engine.transfer(item.motion, code.code, style_velocity=None).motion
+
+
 # one adapter per family: where a family's engine API changes, only its adapter does
 ADAPTERS = {"translator": _translate, "fast": _stylize}
 
@@ -819,7 +843,7 @@ def evaluate(
     seconds["references and items"] = round(time.time() - t, 1)
     loaded = {e: load_engine(e) for e in {ENGINE_OF.get(f, f) for f in families}}
     engines = {f: loaded[ENGINE_OF.get(f, f)] for f in families}
-    adapters = {"translator-clip": ByStyleClip(clips)} if "translator-clip" in families else {}
+    adapters = {"translator-clip": ByStyleClip(clips), "translator-video": ByStyleVideo(clips)}
     outputs: dict[str, list[Output]] = {}
     for f in families:
         t = time.time()

@@ -562,6 +562,11 @@ class TranslatorEngine(Engine):
         timer = timer or StageTimer(self.name)
         return self.predict(self._motion_job(canon, timer), timer).style
 
+    def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
+        """The 2D style code of a video's keypoints (as encoded; no velocity factor)."""
+        timer = timer or StageTimer(self.name)
+        return self.predict(self._keypoints_job(kp, timer), timer).style
+
     def nearest(
         self, code: np.ndarray, count: int = NEAREST, named: bool = False
     ) -> list[dict[str, Any]]:
