@@ -636,7 +636,7 @@ class ByStyleVideo(ByStyleClip):
     from one side (yaw uniform in +-90 degrees, as training projects its views, seeded by
     the take: one video per take) as the joints OpenPose observes
     (``keypoints_of_positions``), through the service's keypoint path
-    (``code_of_keypoints``; no time warp). Projected mocap is a video without a
+    (``code_of_keypoints``, ``played``; no time warp). Projected mocap is a video without a
     tracker's noise: real videos may carry a style less."""
 
     def __call__(self, engine, item: Item, style: str) -> Motion:
@@ -647,7 +647,8 @@ class ByStyleVideo(ByStyleClip):
             gpos = K.global_positions(self.motion(take))
             self.codes[take.name] = engine.code_of_keypoints(Fe.keypoints_of_positions(gpos, yaw))
         code = self.codes[take.name]
-        return engine.transfer(item.motion, code.code, style_velocity=None).motion
+        played = engine.played(code.code, "keypoints")
+        return engine.transfer(item.motion, played, style_velocity=None).motion
 
 
 # one adapter per family: where a family's engine API changes, only its adapter does

@@ -279,8 +279,10 @@ class TranslatorEngine(Engine):
         self.index = {name: i for i, name in enumerate(self.style_names)}
         gains = extra["named_style_gains"]  # model_export.translator's
         self.named_codes = exaggerated(self.codes, [gains[n] for n in self.style_names])
-        # a style clip's code plays as far out as a name's (older exports: as encoded)
+        # a style clip's or video's code plays as far out as a name's (older exports: as
+        # encoded)
         self.clip_style_gain = float(extra.get("clip_style_gain", 1.0))
+        self.video_style_gain = float(extra.get("video_style_gain", 1.0))
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
@@ -424,7 +426,8 @@ class TranslatorEngine(Engine):
                 return Networks(style)
             own = self.run("style3d", {"motion3d": job.x_own})[0][0]
         with timer.stage("decode"):
-            played = self.played(style.code) if style.source == "style" else style.code
+            by_example = style.source in ("style", "keypoints")
+            played = self.played(style.code, style.source) if by_example else style.code
             decoded = self._decoded(job.windows, played)
         return Networks(style, own, decoded)
 
@@ -548,13 +551,15 @@ class TranslatorEngine(Engine):
         speed = float(np.exp(np.dot(weights, np.log([s.speed for s in styles]))))
         return StyleCode(code.astype(np.float32), velocity, "style_mix", speed=speed)
 
-    def played(self, code: np.ndarray) -> np.ndarray:
-        """The code a style clip (or a style registered from clips) plays:
-        ``clip_style_gain`` times as far from the centre of the learned codes as the encoder
-        gives it, as a name's is taken out (model_export.translator's ``CLIP_STYLE_GAIN``).
-        What ``/v1/style-code`` reports and registration stores is the code as encoded."""
+    def played(self, code: np.ndarray, source: str = "style") -> np.ndarray:
+        """The code a style clip (or a style registered from clips; ``source`` "style") or a
+        video ("keypoints") plays: ``clip_style_gain`` or ``video_style_gain`` times as far
+        from the centre of the learned codes as the encoder gives it, as a name's is taken
+        out (model_export.translator's ``CLIP_STYLE_GAIN``, ``VIDEO_STYLE_GAIN``). What
+        ``/v1/style-code`` reports and registration stores is the code as encoded."""
+        gain = self.video_style_gain if source == "keypoints" else self.clip_style_gain
         centre = self.codes.mean(axis=0)
-        return exaggerated(np.asarray(code)[None], [self.clip_style_gain], centre)[0]
+        return exaggerated(np.asarray(code)[None], [gain], centre)[0]
 
     def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
         """The 3D style code (as encoded; it plays as :meth:`played`) and velocity factor
@@ -563,7 +568,8 @@ class TranslatorEngine(Engine):
         return self.predict(self._motion_job(canon, timer), timer).style
 
     def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
-        """The 2D style code of a video's keypoints (as encoded; no velocity factor)."""
+        """The 2D style code of a video's keypoints (as encoded; it plays as :meth:`played`;
+        no velocity factor)."""
         timer = timer or StageTimer(self.name)
         return self.predict(self._keypoints_job(kp, timer), timer).style
 

@@ -438,22 +438,38 @@ def test_a_frame_depends_on_nearby_frames_only(engine, walk):
 
 
 @needs_model
-def test_a_style_clip_plays_its_code_taken_out_as_names_are(engine, walk):
-    """A style clip's code as the encoder gives it (what ``/v1/style-code`` reports) plays
-    ``clip_style_gain`` times as far from the centre of the learned codes, as a name's is
-    taken out: the restyler decodes that code, not the encoded one."""
+@pytest.mark.parametrize("example", ["clip", "video"])
+def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, walk, example):
+    """A style clip's or video's code as the encoder gives it (what ``/v1/style-code``
+    reports) plays ``clip_style_gain`` or ``video_style_gain`` times as far from the centre
+    of the learned codes, as a name's is taken out: the restyler decodes that code, not the
+    encoded one."""
     from service.metrics import StageTimer
 
     content = retarget.to_canonical(bvh.loads(walk))
     style = content.replace(lrot=content.lrot[::-1].copy(), lpos=content.lpos[::-1].copy())
     timer = StageTimer(engine.name)
-    job = engine._motion_job(style, timer)
+    if example == "clip":
+        job, encoded, source = (
+            engine._motion_job(style, timer),
+            engine.code_of_motion(style),
+            "style",
+        )
+        gain = engine.clip_style_gain
+        assert gain == ENTRY["extra"]["clip_style_gain"]
+    else:
+        kp = Fe.keypoints_of_positions(K.global_positions(style), yaw=0.6)
+        job, encoded, source = (
+            engine._keypoints_job(kp, timer),
+            engine.code_of_keypoints(kp),
+            "keypoints",
+        )
+        gain = engine.video_style_gain
+        assert gain == ENTRY["extra"]["video_style_gain"]
     engine._content_job(job, content, timer)
     out = engine.predict(job, timer)
-    assert out.style.source == "style"
-    np.testing.assert_array_equal(out.style.code, engine.code_of_motion(style).code)
-    gain = engine.clip_style_gain
-    assert gain == ENTRY["extra"]["clip_style_gain"] and gain > 1
+    assert out.style.source == source and gain > 1
+    np.testing.assert_array_equal(out.style.code, encoded.code)
     centre = engine.codes.mean(axis=0)
     taken_out = centre + gain * (out.style.code - centre)
     np.testing.assert_allclose(out.decoded, engine._decoded(job.windows, taken_out), atol=1e-4)
