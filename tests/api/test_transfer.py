@@ -449,23 +449,18 @@ def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, wal
     content = retarget.to_canonical(bvh.loads(walk))
     style = content.replace(lrot=content.lrot[::-1].copy(), lpos=content.lpos[::-1].copy())
     timer = StageTimer(engine.name)
-    if example == "clip":
-        job, encoded, source = (
-            engine._motion_job(style, timer),
-            engine.code_of_motion(style),
-            "style",
-        )
-        gain = engine.clip_style_gain
-        assert gain == ENTRY["extra"]["clip_style_gain"]
-    else:
-        kp = Fe.keypoints_of_positions(K.global_positions(style), yaw=0.6)
-        job, encoded, source = (
+    kp = Fe.keypoints_of_positions(K.global_positions(style), yaw=0.6)
+    job, encoded, source, gain_name = {
+        "clip": (engine._motion_job(style, timer), engine.code_of_motion(style), "style", "clip"),
+        "video": (
             engine._keypoints_job(kp, timer),
             engine.code_of_keypoints(kp),
             "keypoints",
-        )
-        gain = engine.video_style_gain
-        assert gain == ENTRY["extra"]["video_style_gain"]
+            "video",
+        ),
+    }[example]
+    gain = getattr(engine, f"{gain_name}_style_gain")
+    assert gain == ENTRY["extra"][f"{gain_name}_style_gain"]
     engine._content_job(job, content, timer)
     out = engine.predict(job, timer)
     assert out.style.source == source and gain > 1
