@@ -621,14 +621,16 @@ class ByStyleClip:
             key=lambda c: zlib.crc32(f"{item.original}|{c.name}".encode()),
         )
 
+    def code_of(self, engine, take):
+        return engine.code_of_motion(self.motion(take))
+
     def __call__(self, engine, item: Item, style: str) -> Motion:
         take = self.take_for(item, style)
         if take.name not in self.codes:
-            self.codes[take.name] = engine.code_of_motion(self.motion(take))
+            self.codes[take.name] = self.code_of(engine, take)
         code = self.codes[take.name]
-        return engine.transfer(
-            item.motion, engine.played(code.code), style_velocity=code.velocity
-        ).motion
+        played = engine.played(code.code, code.source)
+        return engine.transfer(item.motion, played, style_velocity=code.velocity).motion
 
 
 class ByStyleVideo(ByStyleClip):
@@ -636,19 +638,14 @@ class ByStyleVideo(ByStyleClip):
     from one side (yaw uniform in +-90 degrees, as training projects its views, seeded by
     the take: one video per take) as the joints OpenPose observes
     (``keypoints_of_positions``), through the service's keypoint path
-    (``code_of_keypoints``, ``played``; no time warp). Projected mocap is a video without a
-    tracker's noise: real videos may carry a style less."""
+    (``code_of_keypoints``, ``played``; no velocity factor, so no time warp). Projected
+    mocap is a video without a tracker's noise: real videos may carry a style less."""
 
-    def __call__(self, engine, item: Item, style: str) -> Motion:
-        take = self.take_for(item, style)
-        if take.name not in self.codes:
-            seed = zlib.crc32(f"{take.name}|view".encode())
-            yaw = np.deg2rad(np.random.default_rng(seed).uniform(-90.0, 90.0))
-            gpos = K.global_positions(self.motion(take))
-            self.codes[take.name] = engine.code_of_keypoints(Fe.keypoints_of_positions(gpos, yaw))
-        code = self.codes[take.name]
-        played = engine.played(code.code, "keypoints")
-        return engine.transfer(item.motion, played, style_velocity=None).motion
+    def code_of(self, engine, take):
+        seed = zlib.crc32(f"{take.name}|view".encode())
+        yaw = np.deg2rad(np.random.default_rng(seed).uniform(-90.0, 90.0))
+        gpos = K.global_positions(self.motion(take))
+        return engine.code_of_keypoints(Fe.keypoints_of_positions(gpos, yaw))
 
 
 # one adapter per family: where a family's engine API changes, only its adapter does
