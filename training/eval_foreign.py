@@ -53,6 +53,11 @@ translator with one real Bandai take of the requested style as the style clip
 (:class:`ByStyleClip`), and ``translator-video``: with a side view of such a take as the
 video's keypoints (:class:`ByStyleVideo`); the last two recorded in the translator's
 manifest entry as ``foreign_test_half_style_clips`` and ``foreign_test_half_style_videos``.
+The encoders trained on those takes but dataset 2's validation ones
+(``training.translator.fit.held_out_take``): ``translator-clip-unseen`` and
+``translator-video-unseen`` take the style only from those, for the seven styles that
+have any, as a clip or a video the encoders never saw (``..._unseen_style_clips``,
+``..._unseen_style_videos``).
 
 Figures per family and half, against the merged requested style: top-1, top-3, recall per
 style and per shipped name, the share of the most-predicted style, confusion counts. Spread
@@ -107,12 +112,20 @@ from training.judges import (
 
 REPO = Path(__file__).resolve().parent.parent
 FOLDERS = ("cmu-31", "xia", "cmu-dance-43", "cmu-dance-3dsmax")
-FAMILIES = ("translator", "fast", "translator-clip", "translator-video")
+STYLE_FROM = (
+    "translator-clip",
+    "translator-video",
+    "translator-clip-unseen",
+    "translator-video-unseen",
+)
+FAMILIES = ("translator", "fast", *STYLE_FROM)
 # families measured through another's engine, and where their test half is recorded
-ENGINE_OF = {"translator-clip": "translator", "translator-video": "translator"}
+ENGINE_OF = dict.fromkeys(STYLE_FROM, "translator")
 EVALUATION_KEY = {
     "translator-clip": "foreign_test_half_style_clips",
     "translator-video": "foreign_test_half_style_videos",
+    "translator-clip-unseen": "foreign_test_half_unseen_style_clips",
+    "translator-video-unseen": "foreign_test_half_unseen_style_videos",
 }
 HALVES = ("dev", "test")
 SEGMENT_FRAMES = 240  # 8 s at 30 fps
@@ -604,16 +617,23 @@ class ByStyleClip:
     service bounds a clip's) as the restyler plays it (``played``), and the time warp the
     paper's ratio of velocity factors, as ``POST /v1/transfer`` runs a style clip. The
     encoder trained on these takes (but one in ten of dataset 2's): a user's own clip of a
-    style may carry it less."""
+    style may carry it less; with ``unseen`` only those held-out ones are drawn, and only
+    the styles that have any are sent (:meth:`sendable`)."""
 
-    def __init__(self, clips: list) -> None:
+    def __init__(self, clips: list, unseen: bool = False) -> None:
         from training.data import clip_motion
+        from training.translator.fit import held_out_take
 
         self.takes: dict[str, list] = {}
         for c in clips:
-            self.takes.setdefault(canonical_style(c.style), []).append(c)
+            if held_out_take(c.name) or not unseen:
+                self.takes.setdefault(canonical_style(c.style), []).append(c)
         self.motion = clip_motion
         self.codes: dict[str, object] = {}
+
+    def sendable(self, names: list[str]) -> list[str]:
+        """The shipped style names with a take to draw."""
+        return [n for n in names if canonical_style(n) in self.takes]
 
     def take_for(self, item: Item, style: str):
         return min(
@@ -708,9 +728,13 @@ def send(
     adapter=None,
 ):
     """Every item through ``family``'s shipped ``engine`` to every shipped style name
-    (``adapter(engine, item, name)``, else the family's own)."""
+    (``adapter(engine, item, name)``, else the family's own; an adapter's
+    :meth:`ByStyleClip.sendable` names only)."""
     names, outputs = style_names(ENGINE_OF.get(family, family), engine), []
-    adapter = adapter or ADAPTERS[family]
+    if adapter is None:
+        adapter = ADAPTERS[family]
+    else:
+        names = adapter.sendable(names)
     for i, item in enumerate(items):
         for name in names:
             out = adapter(engine, item, name)
@@ -841,7 +865,12 @@ def evaluate(
     seconds["references and items"] = round(time.time() - t, 1)
     loaded = {e: load_engine(e) for e in {ENGINE_OF.get(f, f) for f in families}}
     engines = {f: loaded[ENGINE_OF.get(f, f)] for f in families}
-    adapters = {"translator-clip": ByStyleClip(clips), "translator-video": ByStyleVideo(clips)}
+    adapters = {
+        "translator-clip": ByStyleClip(clips),
+        "translator-video": ByStyleVideo(clips),
+        "translator-clip-unseen": ByStyleClip(clips, unseen=True),
+        "translator-video-unseen": ByStyleVideo(clips, unseen=True),
+    }
     outputs: dict[str, list[Output]] = {}
     for f in families:
         t = time.time()
@@ -862,7 +891,7 @@ def evaluate(
                 f: {
                     "model_name": engines[f][1].name,
                     "model_version": engines[f][1].version,
-                    "shipped_names": style_names(ENGINE_OF.get(f, f), engines[f][0]),
+                    "names_sent": sorted({o.name for o in outputs[f]}),
                     **family_figures(
                         [o for o in outputs[f] if o.item.take in takes], judge.classes, real
                     ),

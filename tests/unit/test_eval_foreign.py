@@ -16,6 +16,9 @@ from motion.styles import STYLE_ALIASES, canonical_style
 from tests.rigs import FIXTURE
 from training import eval_foreign as EF
 
+# the styles Bandai's dataset 2 performs, the only ones with validation takes
+DATASET_2_STYLES = {"active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful"}
+
 BANDAI_STYLES = (
     "normal", "happy", "sad", "angry", "proud", "not-confident", "masculinity", "feminine",
     "childish", "old", "tired", "active", "musical", "giant", "chimpira",  # dataset-1
@@ -235,9 +238,10 @@ def test_a_cached_judge_is_kept_for_the_same_code_and_motion_and_only_for_them()
 
 
 def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch):
-    """:func:`evaluate` with both shipped families (the translator also by style clips) on
-    one item of the test half and a judge trained a few steps (a full run's took 51 minutes
-    on two busy cores), its tables and its records."""
+    """:func:`evaluate` with both shipped families (the translator also by style clips and
+    videos, all takes and unseen ones) on one item of the test half and a judge trained a
+    few steps (a full run's took 51 minutes on two busy cores), its tables and its
+    records."""
     import shutil
 
     from service.config import Settings
@@ -250,9 +254,12 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     monkeypatch.setattr(ConvClipClassifier.__init__, "__defaults__", ((0,), 3))
     report = EF.evaluate(("test",), limit=1, log=lambda *_: None)["test"]
     assert report["half"] == "test" and report["items"] == 1 and len(report["styles"]) == 16
+    shipped = report["families"]["translator"]["names_sent"]
+    assert len(shipped) == 16
     for family in EF.FAMILIES:
         figures = report["families"][family]
-        names = figures["shipped_names"]
+        names = figures["names_sent"]
+        assert set(names) == (DATASET_2_STYLES if family.endswith("-unseen") else set(shipped))
         assert figures["n"] == len(names) and set(figures["top1_by_name"]) == set(names)
         assert 0.0 <= figures["top1"] <= figures["top3"] <= 1.0
         assert figures["spread_ratio"] > 0.0 and -1.0 <= figures["content_kept"] <= 1.0
@@ -271,6 +278,22 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
     with pytest.raises(ValueError, match="test half"):
         EF.record_in_manifest({**report, "half": "dev"}, models)
+
+
+def test_unseen_style_clips_come_only_from_takes_the_encoders_never_trained_on():
+    from tests.conftest import data_path
+    from training.data import load_bandai
+    from training.translator.fit import held_out_take
+
+    data_path("bandai")
+    clips = load_bandai()
+    unseen, every = EF.ByStyleClip(clips, unseen=True), EF.ByStyleClip(clips)
+    assert set(unseen.takes) == DATASET_2_STYLES and len(every.takes) == 16
+    assert all(held_out_take(c.name) for takes in unseen.takes.values() for c in takes)
+    assert sum(map(len, unseen.takes.values())) < sum(map(len, every.takes.values())) / 8
+    names = ["angry", "elderly", "old", "tired", "youthful"]
+    assert unseen.sendable(names) == ["elderly", "old", "tired", "youthful"]
+    assert every.sendable(names) == names
 
 
 def test_a_pinned_judge_reads_back_the_same_and_refuses_changed_features(tmp_path):
