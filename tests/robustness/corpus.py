@@ -195,10 +195,14 @@ def keypoint_json(frames: int = 6) -> bytes:
 
 
 def make_zip(files: dict[str, bytes], compression: int = zipfile.ZIP_DEFLATED) -> bytes:
+    """The same bytes for the same files at any time: an entry's timestamp is fixed, so a
+    zip inside a zip compresses to one length and hypothesis replays what it drew."""
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", compression) as zf:
         for name, content in files.items():
-            zf.writestr(name, content)
+            entry = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+            entry.compress_type = compression
+            zf.writestr(entry, content)
     return buffer.getvalue()
 
 
