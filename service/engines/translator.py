@@ -279,10 +279,12 @@ class TranslatorEngine(Engine):
         self.index = {name: i for i, name in enumerate(self.style_names)}
         gains = extra["named_style_gains"]  # model_export.translator's
         self.named_codes = exaggerated(self.codes, [gains[n] for n in self.style_names])
-        # a style clip's or video's code plays as far out as a name's (older exports: as
-        # encoded)
-        self.clip_style_gain = float(extra.get("clip_style_gain", 1.0))
-        self.video_style_gain = float(extra.get("video_style_gain", 1.0))
+        # how much further out a style clip's ("style") or video's ("keypoints") code plays,
+        # as a name's does (older exports: as encoded)
+        self.example_gains = {
+            "style": float(extra.get("clip_style_gain", 1.0)),
+            "keypoints": float(extra.get("video_style_gain", 1.0)),
+        }
         # other names of a style (Bandai's two datasets name three styles twice)
         self.aliases = {k: v for k, v in extra.get("aliases", {}).items() if v in self.index}
         self.style_dim = int(self.codes.shape[1])
@@ -426,7 +428,7 @@ class TranslatorEngine(Engine):
                 return Networks(style)
             own = self.run("style3d", {"motion3d": job.x_own})[0][0]
         with timer.stage("decode"):
-            by_example = style.source in ("style", "keypoints")
+            by_example = style.source in self.example_gains
             played = self.played(style.code, style.source) if by_example else style.code
             decoded = self._decoded(job.windows, played)
         return Networks(style, own, decoded)
@@ -553,11 +555,11 @@ class TranslatorEngine(Engine):
 
     def played(self, code: np.ndarray, source: str = "style") -> np.ndarray:
         """The code a style clip (or a style registered from clips; ``source`` "style") or a
-        video ("keypoints") plays: ``clip_style_gain`` or ``video_style_gain`` times as far
-        from the centre of the learned codes as the encoder gives it, as a name's is taken
-        out (model_export.translator's ``CLIP_STYLE_GAIN``, ``VIDEO_STYLE_GAIN``). What
+        video ("keypoints") plays: its :attr:`example_gains` times as far from the centre of
+        the learned codes as the encoder gives it, as a name's is taken out
+        (model_export.translator's ``CLIP_STYLE_GAIN``, ``VIDEO_STYLE_GAIN``). What
         ``/v1/style-code`` reports and registration stores is the code as encoded."""
-        gain = self.video_style_gain if source == "keypoints" else self.clip_style_gain
+        gain = self.example_gains[source]
         centre = self.codes.mean(axis=0)
         return exaggerated(np.asarray(code)[None], [gain], centre)[0]
 

@@ -107,12 +107,13 @@ def test_a_style_is_the_mean_of_its_clips_codes_and_is_used_by_name_and_in_mixes
     assert all(s["registered"] is False for s in listing["translator"] if s is not mine[0])
 
     # by name it plays its code as a clip's plays: taken out from the centre of the learned
-    # codes (the engine's clip_style_gain), as a shipped name's code is
+    # codes (the gain of a style clip's code), as a shipped name's code is
     r = client.post("/v1/style-code", data={"style_name": "studio-walk"})
     engine = client.app.state.registry.engines[body["model"]["name"]]
     centre = engine.codes.mean(axis=0)
-    played = centre + engine.clip_style_gain * (np.array(body["code"]) - centre)
-    assert engine.clip_style_gain > 1
+    gain = engine.example_gains["style"]
+    played = centre + gain * (np.array(body["code"]) - centre)
+    assert gain > 1
     assert r.status_code == 200 and r.json()["code"] == pytest.approx(played.tolist(), abs=1e-5)
     assert r.json()["speed"] == 1.0
 

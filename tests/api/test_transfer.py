@@ -441,9 +441,9 @@ def test_a_frame_depends_on_nearby_frames_only(engine, walk):
 @pytest.mark.parametrize("example", ["clip", "video"])
 def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, walk, example):
     """A style clip's or video's code as the encoder gives it (what ``/v1/style-code``
-    reports) plays ``clip_style_gain`` or ``video_style_gain`` times as far from the centre
-    of the learned codes, as a name's is taken out: the restyler decodes that code, not the
-    encoded one."""
+    reports) plays the manifest's ``clip_style_gain`` or ``video_style_gain`` times as far
+    from the centre of the learned codes, as a name's is taken out: the restyler decodes
+    that code, not the encoded one."""
     from service.metrics import StageTimer
 
     content = retarget.to_canonical(bvh.loads(walk))
@@ -459,7 +459,7 @@ def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, wal
             "video",
         ),
     }[example]
-    gain = getattr(engine, f"{gain_name}_style_gain")
+    gain = engine.example_gains[source]
     assert gain == ENTRY["extra"][f"{gain_name}_style_gain"]
     engine._content_job(job, content, timer)
     out = engine.predict(job, timer)
