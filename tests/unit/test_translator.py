@@ -111,6 +111,23 @@ def test_pairs_draw_a_target_of_the_requested_action_in_another_take() -> None:
         assert frames.min() >= 0 and frames.max() <= target.frames - 1
 
 
+def test_every_pair_lists_each_pair_draw_pair_can_draw_and_no_more() -> None:
+    rng = np.random.default_rng(0)
+    takes = [
+        take_of(stepping(120, period=30.0 + 3 * i), f"t{i}", style=i % 3, label=label)
+        for i, label in enumerate(["walk", "walk", "walk", "run", "run"])
+    ]
+    pairs = P.Pairs(takes, 64, rng)
+    listed = {(a.name, b.name) for a, b in pairs.every_pair()}
+    assert len(listed) == 3 * 2 + 2 * 1  # each take with every other take of its action
+    drawn = set()
+    for _ in range(200):
+        content, _, target, _ = pairs.draw_pair()
+        if content is not target:
+            drawn.add((content.name, target.name))
+    assert drawn == listed
+
+
 def test_the_restyler_starts_at_the_mean_pose() -> None:
     torch.manual_seed(0)
     net = Translator(TINY)

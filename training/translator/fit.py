@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
 from motion import canonical as C
 from motion import features as Fe
@@ -181,8 +182,8 @@ class Trainer:
         self.alignment_cache = D.cache_dir() / "translator_alignments.npz"
         if self.alignment_cache.exists():
             self.pairs.alignments = load_alignments(self.alignment_cache)
-            self.val_pairs.alignments = self.pairs.alignments
-        self._saved_alignments = len(self.pairs.alignments)
+        self.val_pairs.alignments = self.pairs.alignments
+        self._align_every_pair()
         self.net = Translator(net_cfg).to(self.device)
         self.disc = Discriminator(net_cfg).to(self.device)
         self.disc_opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.99))
@@ -199,6 +200,21 @@ class Trainer:
             f"{len(takes)} takes, styles {self.styles}, "
             f"restyler {count_parameters(self.net.restyler):,} parameters"
         )
+
+    def _align_every_pair(self) -> None:
+        """Aligns up front (and caches) every pair either set may draw that the cache lacks:
+        then a machine given the cache never needs librosa, and two trainings at once
+        never both write it."""
+        missing = [
+            (a, b)
+            for pairs in (self.pairs, self.val_pairs)
+            for a, b in pairs.every_pair()
+            if (a.name, b.name) not in self.pairs.alignments
+        ]
+        for a, b in tqdm(missing, desc="aligning pairs", disable=not missing):
+            self.val_pairs.aligned(a, b)
+        if missing:
+            save_alignments(self.alignment_cache, self.pairs.alignments)
 
     # --- batches ---------------------------------------------------------------------------
 
@@ -349,9 +365,6 @@ class Trainer:
             "step": self.step,
             "stages": self.stages + ([finished] if finished else []),
         }
-        if len(self.pairs.alignments) > self._saved_alignments:  # dynamic time warping is slow
-            save_alignments(self.alignment_cache, self.pairs.alignments)
-            self._saved_alignments = len(self.pairs.alignments)
         torch.save(payload, str(path) + ".tmp")
         os.replace(str(path) + ".tmp", path)
         state = {

@@ -207,6 +207,17 @@ class Pairs:
             self.alignments[key] = align(a, b, features)
         return self.alignments[key]
 
+    def every_pair(self) -> list[tuple[Take, Take]]:
+        """Every (content, target) pair :meth:`draw_pair` may draw, but a take with itself."""
+        return [
+            (a, b)
+            for (label, flipped), contents in self.by_action.items()
+            for a in contents
+            for style in self.styles
+            for b in self.by_style_action.get((style, label, flipped), [])
+            if a is not b
+        ]
+
     def _start(self, take: Take) -> int:
         return int(self.rng.integers(0, take.frames - self.window + 1))
 
@@ -249,7 +260,7 @@ def save_alignments(path, alignments: dict[tuple[str, str], np.ndarray | None]) 
 
     keys = sorted(alignments)
     values = [np.zeros(0) if alignments[k] is None else alignments[k] for k in keys]
-    tmp = str(path) + ".tmp.npz"
+    tmp = f"{path}.{os.getpid()}.tmp.npz"  # two trainings at once may both save
     np.savez_compressed(
         tmp,
         keys=np.array(json.dumps(keys)),
