@@ -128,6 +128,17 @@ def test_every_pair_lists_each_pair_draw_pair_can_draw_and_no_more() -> None:
     assert drawn == listed
 
 
+def test_alignments_come_back_from_their_cache_file_as_saved(tmp_path) -> None:
+    path = tmp_path / "alignments.npz"
+    saved = {("a", "b"): np.array([0.0, 0.5, 2.0]), ("b", "a"): None, ("a", "c"): np.arange(4.0)}
+    P.save_alignments(path, saved)
+    loaded = P.load_alignments(path)
+    assert loaded.keys() == saved.keys() and loaded["b", "a"] is None
+    for key in (("a", "b"), ("a", "c")):
+        np.testing.assert_array_equal(loaded[key], saved[key])
+    assert [p.name for p in tmp_path.iterdir()] == ["alignments.npz"]  # no temporary file left
+
+
 def test_the_restyler_starts_at_the_mean_pose() -> None:
     torch.manual_seed(0)
     net = Translator(TINY)
