@@ -203,8 +203,8 @@ class Trainer:
 
     def _align_every_pair(self) -> None:
         """Aligns up front (and caches) every pair either set may draw that the cache lacks:
-        then a machine given the cache never needs librosa, and two trainings at once
-        never both write it."""
+        then a machine given the cache never needs librosa, and a training writes the
+        cache only as it starts, never in the middle of its steps."""
         missing = [
             (a, b)
             for pairs in (self.pairs, self.val_pairs)
