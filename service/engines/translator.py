@@ -638,13 +638,16 @@ class TranslatorEngine(Engine):
         style_velocity: float | None = None,
         timer: StageTimer | None = None,
         style_speed: float | None = None,
+        source: str = "code",
     ) -> Transfer:
         """``content`` (canonical, 30 fps) in the style of ``code (S,)``, canonical out: the
         three steps without uploads, for the evaluations. The time warp is ``style_speed``
         over the content's :meth:`own_speed` (named styles) or the ratio of velocity factors
-        (style clips); neither means no time warp (with a warning if asked)."""
+        (style clips); neither means no time warp (with a warning if asked). ``source``
+        "style" or "keypoints": ``code`` is a style clip's or a video's as encoded, and
+        plays as :meth:`predict` plays those (:meth:`played`); else it plays as given."""
         timer = timer or StageTimer(self.name)
-        style = StyleCode(np.asarray(code, np.float32), style_velocity, "code", speed=style_speed)
+        style = StyleCode(np.asarray(code, np.float32), style_velocity, source, speed=style_speed)
         job = TranslatorJob(style, strength=strength, time_warp=time_warp)
         job.foot_cleanup = foot_cleanup
         self._content_job(job, content, timer)
