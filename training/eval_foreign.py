@@ -611,15 +611,15 @@ def _stylize(engine, item: Item, style: str) -> Motion:
 
 class ByStyleClip:
     """The translator with a real take of the style as the style clip instead of its name:
-        for each item and style, one of the style's Bandai takes, picked by a hash of the item
-        (its rig variants get the same) and the take, so a half's items spread over the style's
-        actions and performers. Its code is the 3D encoder's (``code_of_motion``, bounded as the
-        service bounds a clip's), played as the service plays a clip's (the engine's
-    ``played``), and the time warp the
-        paper's ratio of velocity factors, as ``POST /v1/transfer`` runs a style clip. The
-        encoder trained on these takes (but one in ten of dataset 2's): a user's own clip of a
-        style may carry it less; with ``unseen`` only those held-out ones are drawn, and only
-        the styles that have any are sent (:meth:`sendable`)."""
+    for each item and style, one of the style's Bandai takes, picked by a hash of the item
+    (its rig variants get the same) and the take, so a half's items spread over the style's
+    actions and performers. Its code is the 3D encoder's (``code_of_motion``, bounded as the
+    service bounds a clip's), played as the service plays a clip's (the engine's
+    ``played``), and the time warp the paper's ratio of velocity factors, as ``POST
+    /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in ten of
+    dataset 2's): a user's own clip of a style may carry it less; with ``unseen`` only
+    those held-out ones are drawn, and only the styles that have any are sent
+    (:meth:`sendable`)."""
 
     def __init__(self, clips: list, unseen: bool = False) -> None:
         from training.data import clip_motion
