@@ -7,7 +7,7 @@ standardised with the bundle's statistics, the translator's) -> mirrored at both
 (as many frames as the networks see either side, then up to a multiple of ``BUCKET``
 frames, so onnxruntime sees few shapes and short clips still fill the receptive field)
 -> the style's network, the whole clip in one call -> finished as the translator finishes
-its own output, at the bundle's ``strength``
+its own output, at the style's ``strength`` (else the bundle's)
 (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far from the
 content's own pose, on the content's root trajectory, feet planted where the content's
 are, on its floor, and clear of it where the content's are in the air) -> played at the
@@ -156,13 +156,24 @@ class FastEngine(Engine):
         speed = float(self.style_info[style].get("speed") or 1.0)
         return min(max(speed, MIN_WARP), MAX_WARP)
 
+    def strength_of(self, style: str) -> float:
+        """How far from the content's pose to the network's ``style`` is played: the style's
+        own ``strength`` in the bundle, else the bundle's."""
+        return float(self.style_info[style].get("strength", self.strength))
+
     def _motion(self, job: FastJob, output: np.ndarray, timer: StageTimer) -> Motion:
         """The network's output -> a canonical motion, as the translator finishes its own
-        at the bundle's ``strength``."""
+        at the style's strength (:meth:`strength_of`)."""
         frames = job.canon.num_frames
         channels = output[0, :, job.offset : job.offset + frames].T
         return restyled_motion(
-            channels, job.canon, job.features, self.stats, timer, self.strength, job.foot_cleanup
+            channels,
+            job.canon,
+            job.features,
+            self.stats,
+            timer,
+            self.strength_of(job.style),
+            job.foot_cleanup,
         )
 
     def stylize(

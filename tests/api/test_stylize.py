@@ -220,3 +220,26 @@ def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, wa
         clip_frames = job.canon.num_frames
         assert job.offset >= reach, frames
         assert job.x.shape[2] - job.offset - clip_frames >= reach, frames
+
+
+def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
+    """A style whose bundle entry names a strength (active, at 1) is played that far from the
+    content's pose; without one, at the bundle's (0.95): nearer the content."""
+    from motion import kinematics as K
+    from service.engines.fast import StylizeRequest
+    from service.pipeline import Upload
+
+    request = StylizeRequest(Upload("content", data=walk, filename="walk.bvh"), "active")
+    engine = shared_client.app.state.registry.engine_for("fast", request)
+    own, default = engine.style_info["active"].get("strength"), engine.strength
+    assert own is not None and own > default  # the case is real
+
+    def distance_to_content(text: str) -> float:
+        content, result = bvh.loads(walk), bvh.loads(text)
+        gap = K.global_positions(result) - K.global_positions(content)
+        return float(np.linalg.norm(gap, axis=-1).mean())
+
+    at_own = distance_to_content(post(shared_client, walk, "active").text)
+    monkeypatch.delitem(engine.style_info["active"], "strength")
+    at_default = distance_to_content(post(shared_client, walk, "active").text)
+    assert at_default < at_own
