@@ -9,7 +9,8 @@ frames, so onnxruntime sees few shapes and short clips still fill the receptive 
 -> the style's network, the whole clip in one call -> finished as the translator finishes
 its own output, at the style's ``strength`` (else the bundle's)
 (:func:`service.engines.translator.restyled_motion`: smoothed, taken that far from the
-content's own pose, on the content's root trajectory, feet planted where the content's
+content's own pose (above 1: past the network's, away from the content's), on the
+content's root trajectory, feet planted where the content's
 are, on its floor, and clear of it where the content's are in the air) -> played at the
 style's speed.
 """

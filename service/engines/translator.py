@@ -121,7 +121,7 @@ def restyled_motion(
     with timer.stage("rotations"):
         output = Fe.unstandardize(output, stats, "output")
         output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
-        if strength < 1.0:  # part of the way from the content's own pose
+        if strength != 1.0:  # part of the way from the content's own pose, or past the output
             own = enc.content[:, : Fe.OUTPUT_CHANNELS]
             output = own + np.float32(strength) * (output - own)
         motion = Fe.decode_motion(output, content, face=enc.facing)

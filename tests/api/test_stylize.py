@@ -223,8 +223,9 @@ def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, wa
 
 
 def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
-    """A style whose bundle entry names a strength (active, at 1) is played that far from the
-    content's pose; without one, at the bundle's (0.95): nearer the content."""
+    """A style whose bundle entry names a strength (active, at 1.2: past the network's pose)
+    is played that far from the content's pose; without one, at the bundle's (0.95): nearer
+    the content."""
     from motion import kinematics as K
     from service.engines.fast import StylizeRequest
     from service.pipeline import Upload
