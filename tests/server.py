@@ -4,6 +4,7 @@ that need real sockets: graceful shutdown, load, the Docker command, the browser
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -80,6 +81,19 @@ class ServerProcess:
             time.sleep(0.1)
         self.stop()
         raise RuntimeError(f"server not ready after {self.start_timeout} s:\n{self.log()}")
+
+    def wait_every_worker_ready(self, timeout: float = 120.0) -> str:
+        """Polls ``/metrics`` until ``motion_ready`` is 1 (the least over live workers: the
+        first 200 from ``/readyz`` comes from one worker, and another may load its models
+        seconds later on a busy machine); returns that exposition."""
+        deadline = time.monotonic() + timeout
+        while True:
+            exposition = httpx.get(self.url + "/metrics", timeout=5).text
+            if re.search(r"^motion_ready 1\.0$", exposition, re.MULTILINE):
+                return exposition
+            found = re.findall(r"^motion_ready .*$", exposition, re.MULTILINE)
+            assert time.monotonic() < deadline, f"{found} after {timeout} s:\n{self.log()}"
+            time.sleep(0.5)
 
     def signal(self, sig: int = signal.SIGTERM) -> None:
         assert self.process is not None

@@ -8,7 +8,6 @@ workers uses a style registered before the restart."""
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import httpx
@@ -269,19 +268,6 @@ def test_a_folder_that_cannot_be_written_is_a_507(make_client, tmp_path):
 # --- a real server: restarted, and with two workers --------------------------------------
 
 
-def all_ready(server: ServerProcess, times: int = 10, timeout: float = 120.0) -> None:
-    """Wait until ``times`` requests in a row (each on a new connection, so any worker may
-    take it) find the server ready: every worker has loaded its models."""
-    deadline = time.monotonic() + timeout
-    streak = 0
-    while streak < times:
-        assert time.monotonic() < deadline, server.log()
-        ok = httpx.get(server.url + "/readyz", timeout=5).status_code == 200
-        streak = streak + 1 if ok else 0
-        if not ok:
-            time.sleep(0.2)
-
-
 def test_a_style_registered_from_xias_old_clip_survives_a_restart_on_every_worker(tmp_path):
     old = data_path("xia", "old_13_000.bvh").read_bytes()
     walk = {"content": ("walk.bvh", FIXTURE.read_bytes(), "text/plain")}
@@ -298,7 +284,7 @@ def test_a_style_registered_from_xias_old_clip_survives_a_restart_on_every_worke
 
     env.update({"MOTION_WORKERS": "2", "MOTION_INTRA_OP_THREADS": "1"})
     with ServerProcess(env=env, log_path=tmp_path / "second.log") as server:
-        all_ready(server)
+        server.wait_every_worker_ready()
         for _ in range(6):  # whichever worker answers
             r = httpx.post(server.url + "/v1/transfer", files=walk,
                            data={"style_name": "xia-old"}, timeout=60)  # fmt: skip
