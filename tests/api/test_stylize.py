@@ -224,8 +224,8 @@ def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, wa
 
 def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
     """A style whose bundle entry names a strength (active, at 1.2: past the network's pose)
-    is played that far from the content's pose; without one, at the bundle's (0.95): nearer
-    the content."""
+    is played that far from the content's pose, further than at 1; without one, at the
+    bundle's (0.95): nearer the content."""
     from motion import kinematics as K
     from service.engines.fast import StylizeRequest
     from service.pipeline import Upload
@@ -233,7 +233,7 @@ def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
     request = StylizeRequest(Upload("content", data=walk, filename="walk.bvh"), "active")
     engine = shared_client.app.state.registry.engine_for("fast", request)
     own, default = engine.style_info["active"].get("strength"), engine.strength
-    assert own is not None and own > default  # the case is real
+    assert own is not None and own > 1.0 > default  # the case is real
 
     def distance_to_content(text: str) -> float:
         content, result = bvh.loads(walk), bvh.loads(text)
@@ -241,6 +241,8 @@ def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
         return float(np.linalg.norm(gap, axis=-1).mean())
 
     at_own = distance_to_content(post(shared_client, walk, "active").text)
+    monkeypatch.setitem(engine.style_info["active"], "strength", 1.0)
+    at_one = distance_to_content(post(shared_client, walk, "active").text)
     monkeypatch.delitem(engine.style_info["active"], "strength")
     at_default = distance_to_content(post(shared_client, walk, "active").text)
-    assert at_default < at_own
+    assert at_default < at_one < at_own
