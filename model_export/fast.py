@@ -44,14 +44,9 @@ INPUT, OUTPUT = "control", "output"
 # steps of 0.05: top-1 86%, 88%, 90%; content kept 0.870, 0.857, 0.841. The rule: the
 # highest top-1 keeping 0.85 or more.
 STRENGTH = 0.95
-# Styles played at a strength of their own. Active, the weakest on the development half at
-# 0.95 (44%, 11 of 25; the judge's hardest on real clips too), at 1: 56%, family top-1 89.0%
-# against 88.3%, "normal" 10.5% as before, content kept 0.856 against 0.857 (networks
-# 2026-11-26.11; the rule, written first: active 14 of 25 or more, top-1 and "normal" no
-# worse, kept 0.85 or more). At 1.2 (past the network's pose, away from the content's; 1.1
-# and 1.2 tried, the rule written first: active 17 of 25 or more, top-1 89.0% or more,
-# "normal" 11% or less, kept 0.85 or more): active 72% (18 of 25), top-1 90.0%, "normal"
-# 10.0%, kept 0.853.
+# Styles played at a strength of their own, each chosen on the development half under a rule
+# written first (docs/translator.md: "Active at full strength", "Active past the networks'
+# pose"); the others at STRENGTH.
 STYLE_STRENGTHS = {"active": 1.2}
 
 
@@ -200,8 +195,9 @@ def main(argv: list[str] | None = None) -> dict:
             "steps": result["steps"],
             "train_l1": result["train_l1"],
             "trained_at": result.get("trained_at"),
-            "strength": STYLE_STRENGTHS.get(name, STRENGTH),
         }
+        if name in STYLE_STRENGTHS:
+            styles[name]["strength"] = STYLE_STRENGTHS[name]
         print(f"exported {graph}: parity max abs {parity_max[graph]:.2e}", flush=True)
 
     entry = {
