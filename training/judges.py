@@ -63,6 +63,17 @@ def skating(motion: Motion) -> float:
     return CT.canonical_foot_sliding(motion)
 
 
+def jerk(motion: Motion) -> float:
+    """Mean joint jerk in m/s^3 of a canonical motion: the third difference of each body
+    joint's position about the hips in the body's facing frame, the frame a restyler's
+    jitter shows in first (where the body travels is the content's)."""
+    if motion.num_frames < 4:
+        return 0.0
+    pos = Fe.encode(motion).style3d.reshape(motion.num_frames, -1, 3).astype(np.float64)
+    third = np.diff(pos * (Fe.LEG / 100.0), n=3, axis=0) * motion.fps**3
+    return float(np.linalg.norm(third, axis=-1).mean())
+
+
 _BODY_MIRROR = [_MIRROR[j] - 1 for j in Fe.BODY]  # Fe.BODY is every joint but joint_Root (0)
 
 
@@ -269,13 +280,17 @@ def style_names(family: str, engine) -> list[str]:
     return sorted(engine.style_info)
 
 
-def transfer(family: str, engine, canon: Motion, style: str) -> Motion:
-    """``canon`` in ``style`` through the shipped engine, as the service runs it (time warp
-    and foot clean-up on): the translator by the style's name at strength 1, the fast
-    networks by theirs."""
+def transfer(family: str, engine, canon: Motion, style: str, time_warp: bool = True) -> Motion:
+    """``canon`` in ``style`` through the shipped engine, as the service runs it (foot
+    clean-up on, the time warp unless ``time_warp`` is off): the translator by the style's
+    name at strength 1, the fast networks by theirs."""
     if family == "translator":
         target = engine.code_of_name(style)
         return engine.transfer(
-            canon, target.code, style_velocity=target.velocity, style_speed=target.speed
+            canon,
+            target.code,
+            time_warp=time_warp,
+            style_velocity=target.velocity,
+            style_speed=target.speed,
         ).motion
-    return engine.stylize(canon, style)
+    return engine.stylize(canon, style, time_warp=time_warp)

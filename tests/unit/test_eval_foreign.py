@@ -264,6 +264,12 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         assert 0.0 <= figures["top1"] <= figures["top3"] <= 1.0
         assert figures["spread_ratio"] > 0.0 and -1.0 <= figures["content_kept"] <= 1.0
         assert sum(b["n"] for b in figures["by_source"].values()) == len(names)
+        jitter = figures["held_out_jitter"]
+        if family in EF.ADAPTERS:  # the families with networks of their own
+            assert jitter["takes"] == 29 and jitter["real_m_s3"] > 0.0
+            assert 0.3 < jitter["ratio"] < 3.0  # neither frozen nor shaking
+        else:
+            assert jitter is None
     reference = report["real_bandai"]["leave_action_out"]
     assert reference["n"] == 454
     clips = [g["n"] for g in reference["within_actor_groups"].values()]

@@ -81,3 +81,22 @@ def test_conv_classifier_learns_what_tells_clips_apart(monkeypatch):
         x = 0.3 * rng.normal(size=(len(t), 6))
         x[:, 0] += np.sin(t * (0.1 if k == 0 else 1.2) + 1.0)
         assert clf.predict(x.astype(np.float32)) == label
+
+
+def test_jerk_sees_jitter_and_tempo_not_where_the_body_stands():
+    """Jerk reads how the joints move about the hips: a tremor added to the rotations
+    raises it, the walk played faster raises it and slower lowers it, and the body moved
+    whole leaves it as it was."""
+    from motion import rotations as rot
+    from motion.features import time_warp
+
+    motion = retarget.to_canonical(bvh.load(FIXTURE))
+    calm = ES.jerk(motion)
+    assert calm > 0.0
+    tremor = np.random.default_rng(0).normal(0.0, 0.01, motion.lrot.shape[:2] + (3,))
+    shaken = motion.replace(lrot=rot.mul(motion.lrot, rot.from_rotvec(tremor)))
+    assert ES.jerk(shaken) > 3.0 * calm
+    assert ES.jerk(time_warp(motion, 0.5)) < calm < ES.jerk(time_warp(motion, 2.0))
+    moved = motion.lpos.copy()
+    moved[:, 0] += [150.0, 20.0, -300.0]
+    assert np.isclose(ES.jerk(motion.replace(lpos=moved)), calm, rtol=1e-6)
