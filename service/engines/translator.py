@@ -61,8 +61,9 @@ NEAREST = 5  # named styles listed by nearest()
 # Bandai clips turning 41 deg/s vs 9 real), which also slid the feet. On the held-out
 # evaluation sigma 2 lowered foot sliding from 10.0 to 8.5 cm/s (real: 7.6) and left style
 # and content recognition as they were (12.6 -> 13.3%, 49.0 -> 49.1%). Measured when whole
-# clips ran at once; with windows the jitter is 2.9x the walk's (0.8x smoothed), and sigma
-# 1 instead of 2 changes recognition by under a point.
+# clips ran at once. For the paired restyler (docs/translator.md, "The output smoothing,
+# chosen again"): its raw output jerks 1.36x real mocap on Bandai's held-out takes, sigma 2
+# leaves 0.70x and sigma 1 0.92x; kept at 2 while the test half had seen the alternatives.
 OUTPUT_SMOOTHING = 2.0
 # Codes from a clip or a video are scaled down to this multiple of the largest named style
 # code's norm: Bandai clips' own codes reach 1.2x it, and the decoder, which never saw
