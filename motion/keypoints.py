@@ -523,7 +523,7 @@ def _read_zip(raw: bytes, max_frames: int, max_bytes: int) -> tuple[list[Any], d
         parts = PurePosixPath(name).parts
         if name.startswith("/") or ".." in parts or re.match(r"^[A-Za-z]:", name):
             raise MotionError(f"zip entry {info.filename!r} has an unsafe path")
-        if info.is_dir() or not parts:
+        if not parts or info.is_dir():  # an empty name has no last character to test
             continue
         base = parts[-1]
         if parts[0] == "__MACOSX" or base.startswith("."):

@@ -522,3 +522,16 @@ def test_joint_centre_offsets_are_the_canonical_skeletons():
         (y["Neck"] - shoulders) / torso, abs=1e-3
     )
     assert keypoints.HEAD_FROM_NECK == pytest.approx(head / torso, abs=1e-3)
+
+
+def test_a_zip_entry_without_a_name_is_skipped() -> None:
+    """zipfile's own ``is_dir`` fails on an entry whose name is empty (the fuzz test found
+    one): such an entry is passed over like a folder, and the frames load."""
+    frames = {f"{i:03d}.json": dumps(GOOD_FRAME) for i in range(3)}
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr(zipfile.ZipInfo(""), b"{}")  # writestr("") refuses; a hostile file need not
+        for name, content in frames.items():
+            zf.writestr(name, content)
+    loaded = keypoints.load(buf.getvalue())
+    assert loaded.num_frames == keypoints.load(make_zip(frames)).num_frames == 3
