@@ -65,8 +65,9 @@ def skating(motion: Motion) -> float:
 
 def jerk(motion: Motion) -> float:
     """Mean joint jerk in m/s^3 of a canonical motion: the third difference of each body
-    joint's position about the hips in the body's facing frame, the frame a restyler's
-    jitter shows in first (where the body travels is the content's)."""
+    joint's position over the root on the floor, in the body's facing frame (the features'
+    3D style input, the hips' height included): how the body moves, not where it travels
+    (the content's)."""
     if motion.num_frames < 4:
         return 0.0
     pos = Fe.encode(motion).style3d.reshape(motion.num_frames, -1, 3).astype(np.float64)
