@@ -70,7 +70,7 @@ def jerk(motion: Motion) -> float:
     (the content's)."""
     if motion.num_frames < 4:
         return 0.0
-    pos = Fe.encode(motion).style3d.reshape(motion.num_frames, -1, 3).astype(np.float64)
+    pos = Fe.style3d_features(motion).reshape(motion.num_frames, -1, 3).astype(np.float64)
     third = np.diff(pos * (Fe.LEG / 100.0), n=3, axis=0) * motion.fps**3
     return float(np.linalg.norm(third, axis=-1).mean())
 

@@ -84,7 +84,7 @@ def test_conv_classifier_learns_what_tells_clips_apart(monkeypatch):
 
 
 def test_jerk_sees_jitter_and_tempo_not_where_the_body_stands():
-    """Jerk reads how the joints move about the hips: a tremor added to the rotations
+    """Jerk reads how the joints move over the root on the floor: a tremor added to the rotations
     raises it, the walk played faster raises it and slower lowers it, and the body moved
     whole leaves it as it was."""
     from motion import rotations as rot
