@@ -9,7 +9,8 @@ one manifest entry ``fast-bandai`` with every graph, each style's speed and the 
 names' aliases taken from the shipped translator (the networks' teacher,
 ``training.fast_style``). Weights are stored as float16 (:func:`store_half`). Each graph is
 checked against torch, its weights rounded as stored, at several lengths and batch sizes
-(``PARITY_SHAPES``, rtol 1e-4) before it is listed.
+(``PARITY_SHAPES``, rtol 1e-4) before it is listed. The entry's output smoothing is then
+measured on the exported networks (``training.output_smoothing``; needs the shared data).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import torch
 from model_export import manifest as MF
 from motion import features as Fe
 from training import fast_common as FC
+from training import output_smoothing
 
 OPSET = 17
 PARITY_SHAPES = [(b, t) for t in (32, 100, 241) for b in (1, 3)]
@@ -229,10 +231,12 @@ def main(argv: list[str] | None = None) -> dict:
                 "dilations": list(FC.DILATIONS),
             },
             "styles": styles,
+            "output_smoothing": max(output_smoothing.CANDIDATES),  # until measured below
         },
     }
     MF.put_entry(entry, models_dir)
     print(f"manifest: {MODEL_NAME} with {len(styles)} styles, {len(files)} files", flush=True)
+    entry["extra"]["output_smoothing"] = output_smoothing.choose("fast", models_dir, exporting=True)
     return entry
 
 

@@ -83,12 +83,40 @@ def put_evaluation(
     A new export replaces the entry, and with it these figures."""
     path = Path(models_dir) / MANIFEST_NAME
     doc = json.loads(path.read_text())
+    entry = _entry_at(doc, name, version)
+    entry.setdefault("metrics", {}).setdefault("evaluation", {})[key] = figures
+    _write(path, doc)
+
+
+def update_entry(
+    name: str,
+    version: str,
+    extra: dict[str, Any] | None = None,
+    metrics: dict[str, Any] | None = None,
+    models_dir: Path = MODELS_DIR,
+    new_version: str | None = None,
+) -> None:
+    """Set keys of ``extra`` and ``metrics`` in the entry ``name``, which must still be at
+    ``version``: what an export measures of its model once the entry is written. A change
+    to what the model outputs takes ``new_version`` (and drops the figures measured on the
+    old one, ``metrics.evaluation``)."""
+    path = Path(models_dir) / MANIFEST_NAME
+    doc = json.loads(path.read_text())
+    entry = _entry_at(doc, name, version)
+    entry.setdefault("extra", {}).update(extra or {})
+    entry.setdefault("metrics", {}).update(metrics or {})
+    if new_version is not None:
+        entry["version"] = new_version
+        entry["metrics"].pop("evaluation", None)
+    _write(path, doc)
+
+
+def _entry_at(doc: dict[str, Any], name: str, version: str) -> dict[str, Any]:
     entry = next((m for m in doc.get("models", []) if m.get("name") == name), None)
     if entry is None or entry.get("version") != version:
         found = None if entry is None else entry.get("version")
         raise ValueError(f"manifest has {name!r} at version {found!r}, not {version!r}")
-    entry.setdefault("metrics", {}).setdefault("evaluation", {})[key] = figures
-    _write(path, doc)
+    return entry
 
 
 def measuring_machine() -> str:

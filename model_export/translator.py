@@ -16,7 +16,9 @@ Writes ``models/translator/``:
   (``velocity``) and the style's ``speed`` against the other styles on the same actions
   (:func:`style_speeds`), a named style's time warp;
 
-and the manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``).
+and the manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``), with the
+output smoothing ``training.output_smoothing`` measures for the new graphs (Bandai's
+held-out takes: the export needs the shared data).
 The checkpoint is read from a copy (a running training overwrites it).
 """
 
@@ -36,6 +38,7 @@ import torch
 from model_export import manifest as MF
 from motion import features as Fe
 from motion.styles import exaggerated
+from training import output_smoothing
 from training.translator.networks import RESTYLER_IN, NetworkConfig, Translator
 
 OPSET = 17
@@ -357,11 +360,15 @@ def main(argv: list[str] | None = None) -> dict:
             "clip_style_gain": CLIP_STYLE_GAIN,
             "video_style_gain": VIDEO_STYLE_GAIN,
             "styles": styles,
+            "output_smoothing": max(output_smoothing.CANDIDATES),  # until measured below
         },
     }
     MF.put_entry(entry, models_dir)
     sizes = {p.name: p.stat().st_size for p in paths.values()}
     print(f"manifest: {MODEL_NAME} {entry['version']}, graphs {sizes} bytes", flush=True)
+    entry["extra"]["output_smoothing"] = output_smoothing.choose(
+        "translator", models_dir, exporting=True
+    )
     return entry
 
 

@@ -8,7 +8,8 @@ standardised with the bundle's statistics, the translator's) -> mirrored at both
 frames, so onnxruntime sees few shapes and short clips still fill the receptive field)
 -> the style's network, the whole clip in one call -> finished as the translator finishes
 its own output, at the style's ``strength`` (else the bundle's)
-(:func:`service.engines.translator.restyled_motion`: smoothed, taken that far from the
+(:func:`service.engines.translator.restyled_motion`: smoothed by the bundle's own
+``output_smoothing``, taken that far from the
 content's own pose (above 1: past the network's, away from the content's), on the
 content's root trajectory, feet planted where the content's
 are, on its floor, and clear of it where the content's are in the air) -> played at the
@@ -82,6 +83,8 @@ class FastEngine(Engine):
         self.aliases = {a: n for a, n in extra.get("aliases", {}).items() if n in self.style_info}
         self.strength = float(extra["strength"])  # model_export.fast's
         self.margin = int(extra["receptive_field"])  # frames the networks see either side
+        # sigma in frames, chosen at export by training.output_smoothing
+        self.output_smoothing = float(extra["output_smoothing"])
 
     def styles(self) -> list[dict[str, Any]]:
         return [
@@ -173,6 +176,7 @@ class FastEngine(Engine):
             job.features,
             self.stats,
             timer,
+            self.output_smoothing,
             self.strength_of(job.style),
             job.foot_cleanup,
         )

@@ -12,7 +12,10 @@ receptive field) by mirroring it at both ends, so onnxruntime sees few shapes; t
 of the named styles were computed the same way (their mean over the style's Bandai
 takes). A name may be another name of a style (``extra.aliases``: old is elderly).
 
-A transfer: restyle with the target code; at a ``strength`` below 1, each joint's rotation
+A transfer: restyle with the target code; smooth the rotations over time (a Gaussian of
+``extra.output_smoothing`` frames, chosen per model at export by
+``training.output_smoothing``: the least that leaves the output no jerkier than real
+mocap); at a ``strength`` below 1, each joint's rotation
 goes that part of the way from the content's own to the restyled one (0 gives the content
 back); the content's root trajectory
 (``features.decode_motion``); the feet planted where the CONTENT's are held on the
@@ -56,15 +59,6 @@ from service.registered_styles import StyleStore
 BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
 NEAREST = 5  # named styles listed by nearest()
-# Gaussian sigma (frames at 30 fps) on the decoder's rotations: it adds frame-to-frame
-# jitter real motion lacks (joint jerk 4.3x the content's on the CMU walk; hips on standing
-# Bandai clips turning 41 deg/s vs 9 real), which also slid the feet. On the held-out
-# evaluation sigma 2 lowered foot sliding from 10.0 to 8.5 cm/s (real: 7.6) and left style
-# and content recognition as they were (12.6 -> 13.3%, 49.0 -> 49.1%). Measured when whole
-# clips ran at once. For the paired restyler (docs/translator.md, "The output smoothing,
-# chosen again"): its raw output jerks 1.36x real mocap on Bandai's held-out takes, sigma 2
-# leaves 0.70x and sigma 1 0.92x; kept at 2 while the test half had seen the alternatives.
-OUTPUT_SMOOTHING = 2.0
 # Codes from a clip or a video are scaled down to this multiple of the largest named style
 # code's norm: Bandai clips' own codes reach 1.2x it, and the decoder, which never saw
 # larger codes, then throws the body about. Real-video walks code at 0.4-0.6x; a video of
@@ -112,16 +106,19 @@ def restyled_motion(
     enc: Fe.Encoded,
     stats: Fe.FeatureStats,
     timer: StageTimer,
+    smoothing: float,
     strength: float = 1.0,
     foot_cleanup: bool = True,
 ) -> Motion:
     """A restyler's standardised output ``(F, OUTPUT_CHANNELS)`` for the canonical
-    ``content`` (encoded as ``enc``) -> the canonical result: smoothed, taken ``strength``
-    of the way from the content's own pose, on the content's root trajectory, feet on its
-    floor (module docstring). The fast networks' output is finished the same way."""
+    ``content`` (encoded as ``enc``) -> the canonical result: smoothed over time (a Gaussian
+    of ``smoothing`` frames, the bundle's ``output_smoothing``), taken ``strength`` of the
+    way from the content's own pose, on the content's root trajectory, feet on its floor
+    (module docstring). The fast networks' output is finished the same way."""
     with timer.stage("rotations"):
         output = Fe.unstandardize(output, stats, "output")
-        output = gaussian_filter1d(output, OUTPUT_SMOOTHING, axis=0, mode="nearest")
+        if smoothing > 0:
+            output = gaussian_filter1d(output, smoothing, axis=0, mode="nearest")
         if strength != 1.0:  # part of the way from the content's own pose, or past the output
             own = enc.content[:, : Fe.OUTPUT_CHANNELS]
             output = own + np.float32(strength) * (output - own)
@@ -295,6 +292,8 @@ class TranslatorEngine(Engine):
         self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
         self.min_frames = padded_length(1, int(extra["receptive_field"]))
         self.window = int(extra["window"])
+        # sigma in frames, chosen at export by training.output_smoothing
+        self.output_smoothing = float(extra["output_smoothing"])
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
             raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
@@ -472,7 +471,14 @@ class TranslatorEngine(Engine):
             blended = self._blend(out.decoded, job.length)
         output = blended[job.offset : job.offset + content.num_frames]
         motion = restyled_motion(
-            output, content, enc, self.stats, timer, job.strength, job.foot_cleanup
+            output,
+            content,
+            enc,
+            self.stats,
+            timer,
+            self.output_smoothing,
+            job.strength,
+            job.foot_cleanup,
         )
         warnings: list[str] = []
         factor = 1.0

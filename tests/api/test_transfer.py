@@ -23,7 +23,6 @@ from service.engines.translator import (
     CODE_NORM_LIMIT,
     MAX_WARP,
     MIN_WARP,
-    OUTPUT_SMOOTHING,
     SAME_STYLE_FAR,
     SAME_STYLE_NEAR,
     TranslatorEngine,
@@ -430,7 +429,7 @@ def test_a_frame_depends_on_nearby_frames_only(engine, walk):
     longer = content.replace(lrot=there_and_back(content.lrot), lpos=there_and_back(content.lpos))
     code = engine.code_of_name(STYLES[0]).code
     # frames before the clip's last window, less the output smoothing's reach (4 sigma)
-    kept = window_starts(content.num_frames, WINDOW)[-1] - int(4 * OUTPUT_SMOOTHING)
+    kept = window_starts(content.num_frames, WINDOW)[-1] - int(4 * engine.output_smoothing)
     assert kept >= WINDOW // 2
     a = engine.transfer(content, code, time_warp=False, foot_cleanup=False).motion
     b = engine.transfer(longer, code, time_warp=False, foot_cleanup=False).motion

@@ -55,6 +55,26 @@ def test_figures_of_another_version_are_refused(models):
     assert (models / "manifest.json").read_text() == before
 
 
+def test_what_an_export_measures_lands_in_its_own_entry(models):
+    MF.update_entry("translator-test", "1", {"output_smoothing": 1.0}, {"jerk": 0.9}, models)
+    (model,) = load_manifest(models).models
+    assert model.extra["output_smoothing"] == 1.0
+    assert model.metrics == {"rec_pos_cm": 3.2, "jerk": 0.9}
+    with pytest.raises(ValueError, match="version '1', not '2'"):
+        MF.update_entry("translator-test", "2", {"output_smoothing": 2.0}, models_dir=models)
+    assert load_manifest(models).models[0].extra["output_smoothing"] == 1.0
+
+
+def test_a_change_to_what_a_model_outputs_is_a_new_version(models):
+    MF.put_evaluation("translator-test", "1", "foreign_test_half", {"top1": 0.8}, models)
+    MF.update_entry("translator-test", "1", {"output_smoothing": 2.0}, models_dir=models)
+    assert "evaluation" in load_manifest(models).models[0].metrics  # same outputs, same figures
+    MF.update_entry("translator-test", "1", {"output_smoothing": 1.0}, None, models, "1b")
+    (model,) = load_manifest(models).models
+    assert model.version == "1b" and model.extra["output_smoothing"] == 1.0
+    assert "evaluation" not in model.metrics
+
+
 def test_a_new_export_drops_the_old_evaluation(models):
     MF.put_evaluation("translator-test", "1", "translator_held_out_takes", {"rows": {}}, models)
     MF.put_entry(entry("2"), models)

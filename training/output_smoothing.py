@@ -1,0 +1,89 @@
+"""The output smoothing an exported restyling family ships with, chosen without a judge.
+
+    python -m training.output_smoothing translator|fast [--models-dir DIR]
+
+Both families smooth their network's output rotations over time, a Gaussian of sigma
+frames (``service.engines.translator.restyled_motion``), against the frame-to-frame
+jitter a network adds; the same smoothing takes the styles' own quick movements (angry's
+flailing, active's pumping). So each exported model gets the smallest sigma of
+:data:`CANDIDATES` at which its output, as the service finishes it, jerks no more than
+real mocap with the same timing (``training.eval_foreign.held_out_jitter``: Bandai's
+held-out takes restyled to their own style). The exports run this after writing their
+entry; it records the sigma (``extra.output_smoothing``) and each candidate's jerk against
+real (``metrics.held_out_jerk``) in that entry, under the version the export gave it.
+Run alone on an exported model, a sigma other than its entry's is a new version.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from model_export import manifest as MF
+
+CANDIDATES = (0.0, 0.5, 1.0, 1.5, 2.0)  # sigma, frames at 30 fps
+LIMIT = 1.0  # output jerk over the real takes' jerk
+
+
+def smallest_within(ratios: dict[float, float], limit: float = LIMIT) -> float:
+    """The smallest sigma whose jerk ratio is at most ``limit``."""
+    within = sorted(s for s, r in ratios.items() if r <= limit)
+    if not within:
+        worst = ", ".join(f"sigma {s:g}: {r:.2f}" for s, r in sorted(ratios.items()))
+        raise ValueError(f"no output smoothing brings the jerk to {limit:g}x real ({worst})")
+    return within[0]
+
+
+def measure(family: str, engine, clips: list, candidates=CANDIDATES) -> dict[float, float]:
+    """Each candidate sigma's held-out jerk ratio for ``engine``, loaded as the service
+    loads it."""
+    from training.eval_foreign import held_out_jitter
+
+    ratios = {}
+    for sigma in candidates:
+        engine.output_smoothing = sigma
+        ratios[sigma] = held_out_jitter(family, engine, clips)["ratio"]
+        print(f"{family}: sigma {sigma:g}, jerk {ratios[sigma]:.3f}x real", flush=True)
+    return ratios
+
+
+def choose(family: str, models_dir: Path = MF.MODELS_DIR, exporting: bool = False) -> float:
+    """Measure the exported ``family`` in ``models_dir`` and record its smoothing: under
+    the entry's version when ``exporting`` (the export has just written it) or when the
+    sigma is the entry's already, else under a new one (the outputs change)."""
+    from service.config import Settings
+    from service.engines.fast import FastEngine
+    from service.engines.translator import TranslatorEngine
+    from service.manifest import load_manifest
+    from training.data import load_bandai
+
+    models_dir = Path(models_dir)
+    entry = next(m for m in load_manifest(models_dir).models if m.family == family)
+    cls = {"translator": TranslatorEngine, "fast": FastEngine}[family]
+    engine = cls(entry, models_dir, Settings(models_dir=models_dir))
+    engine.load()
+    ratios = measure(family, engine, load_bandai())
+    sigma = smallest_within(ratios)
+    same = exporting or sigma == float(entry.extra["output_smoothing"])
+    MF.update_entry(
+        entry.name,
+        entry.version,
+        extra={"output_smoothing": sigma},
+        metrics={"held_out_jerk": {f"{s:g}": r for s, r in ratios.items()}},
+        models_dir=models_dir,
+        new_version=None if same else MF.dated_version(entry.name, models_dir),
+    )
+    print(f"{entry.name}: output smoothing sigma {sigma:g}", flush=True)
+    return sigma
+
+
+def main(argv: list[str] | None = None) -> float:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("family", choices=("translator", "fast"))
+    p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
+    args = p.parse_args(argv)
+    return choose(args.family, args.models_dir)
+
+
+if __name__ == "__main__":
+    main()
