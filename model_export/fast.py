@@ -10,7 +10,8 @@ names' aliases taken from the shipped translator (the networks' teacher,
 ``training.fast_style``). Weights are stored as float16 (:func:`store_half`). Each graph is
 checked against torch, its weights rounded as stored, at several lengths and batch sizes
 (``PARITY_SHAPES``, rtol 1e-4) before it is listed. The entry's output smoothing is then
-measured on the exported networks (``training.output_smoothing``; needs the shared data).
+measured on the exported networks (``training.output_smoothing``; needs the shared data)
+unless ``--output-smoothing`` sets it.
 """
 
 from __future__ import annotations
@@ -160,6 +161,11 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--checkpoint-dir", default=str(FC.CHECKPOINTS))
     p.add_argument("--models-dir", default=str(MF.MODELS_DIR))
     p.add_argument("--styles", nargs="*", help="only these (default: every checkpoint)")
+    p.add_argument(
+        "--output-smoothing",
+        type=float,
+        help="sigma set, not measured: for styles without held-out takes to measure it on",
+    )
     args = p.parse_args(argv)
     ckpt_dir, models_dir = Path(args.checkpoint_dir), Path(args.models_dir)
     out = models_dir / FOLDER
@@ -231,12 +237,19 @@ def main(argv: list[str] | None = None) -> dict:
                 "dilations": list(FC.DILATIONS),
             },
             "styles": styles,
-            "output_smoothing": max(output_smoothing.CANDIDATES),  # until measured below
+            # measured below unless set by hand
+            "output_smoothing": (
+                max(output_smoothing.CANDIDATES)
+                if args.output_smoothing is None
+                else args.output_smoothing
+            ),
         },
     }
     MF.put_entry(entry, models_dir)
     print(f"manifest: {MODEL_NAME} with {len(styles)} styles, {len(files)} files", flush=True)
-    entry["extra"]["output_smoothing"] = output_smoothing.choose("fast", models_dir, exporting=True)
+    if args.output_smoothing is None:
+        sigma = output_smoothing.choose("fast", models_dir, exporting=True)
+        entry["extra"]["output_smoothing"] = sigma
     return entry
 
 

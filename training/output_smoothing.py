@@ -56,13 +56,22 @@ def choose(family: str, models_dir: Path = MF.MODELS_DIR, exporting: bool = Fals
     from service.engines.translator import TranslatorEngine
     from service.manifest import load_manifest
     from training.data import load_bandai
+    from training.judges import style_names
+    from training.translator.fit import held_out_take
 
     models_dir = Path(models_dir)
     entry = next(m for m in load_manifest(models_dir).models if m.family == family)
     cls = {"translator": TranslatorEngine, "fast": FastEngine}[family]
     engine = cls(entry, models_dir, Settings(models_dir=models_dir))
     engine.load()
-    ratios = measure(family, engine, load_bandai())
+    styles = set(style_names(family, engine))
+    clips = [c for c in load_bandai() if c.style in styles]
+    if not any(held_out_take(c.name) for c in clips):
+        raise ValueError(
+            f"{entry.name}: no held-out Bandai take is in one of its styles "
+            f"({', '.join(sorted(styles))}) to measure its output smoothing on"
+        )
+    ratios = measure(family, engine, clips)
     sigma = smallest_within(ratios)
     same = exporting or sigma == float(entry.extra["output_smoothing"])
     MF.update_entry(
