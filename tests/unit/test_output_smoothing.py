@@ -12,7 +12,7 @@ from training import output_smoothing as OS
 
 def test_the_smallest_sigma_within_the_limit_is_chosen():
     assert OS.smallest_within({0.0: 1.36, 0.5: 1.19, 1.0: 0.92, 1.5: 0.78, 2.0: 0.70}) == 1.0
-    assert OS.smallest_within({2.0: 0.7, 0.0: 0.99}) == 0.0  # order of the measures is no matter
+    assert OS.smallest_within({2.0: 0.7, 0.0: 0.99}) == 0.0  # in whatever order measured
     assert OS.smallest_within({0.0: 1.5, 1.0: 1.0}) == 1.0  # at the limit counts
 
 
