@@ -259,14 +259,15 @@ class ClipClassifier:
 # --------------------------------------------------------------------------- families
 
 
-def load_engine(family: str):
-    """The shipped engine of ``family``, loaded as the service loads it."""
+def load_engine(family: str, models_dir: Path | None = None):
+    """The shipped engine of ``family`` (in ``models_dir``, else the service's models
+    folder), loaded as the service loads it."""
     from service.config import Settings
     from service.engines.fast import FastEngine
     from service.engines.translator import TranslatorEngine
     from service.manifest import load_manifest
 
-    settings = Settings()
+    settings = Settings() if models_dir is None else Settings(models_dir=models_dir)
     manifest = load_manifest(settings.models_dir)
     entry = next(m for m in manifest.models if m.family == family)
     cls = {"translator": TranslatorEngine, "fast": FastEngine}[family]

@@ -51,19 +51,11 @@ def choose(family: str, models_dir: Path = MF.MODELS_DIR, exporting: bool = Fals
     """Measure the exported ``family`` in ``models_dir`` and record its smoothing: under
     the entry's version when ``exporting`` (the export has just written it) or when the
     sigma is the entry's already, else under a new one (the outputs change)."""
-    from service.config import Settings
-    from service.engines.fast import FastEngine
-    from service.engines.translator import TranslatorEngine
-    from service.manifest import load_manifest
     from training.data import load_bandai
-    from training.judges import style_names
+    from training.judges import load_engine, style_names
     from training.translator.fit import held_out_take
 
-    models_dir = Path(models_dir)
-    entry = next(m for m in load_manifest(models_dir).models if m.family == family)
-    cls = {"translator": TranslatorEngine, "fast": FastEngine}[family]
-    engine = cls(entry, models_dir, Settings(models_dir=models_dir))
-    engine.load()
+    engine, entry, models_dir = load_engine(family, Path(models_dir))
     styles = set(style_names(family, engine))
     clips = [c for c in load_bandai() if c.style in styles]
     if not any(held_out_take(c.name) for c in clips):
