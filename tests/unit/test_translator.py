@@ -214,3 +214,14 @@ def test_style_speeds_compare_styles_on_the_same_action() -> None:
         }  # fmt: skip
     )
     assert speeds["quick"] == pytest.approx(2.0) and speeds["slow"] == pytest.approx(0.5)
+
+
+def test_every_flag_of_the_committed_schedule_is_one_fit_reads() -> None:
+    from training.translator import fit, schedule
+
+    for stage in schedule.load_schedule():
+        args, cfg = fit.parse_args(schedule.stage_argv(stage))
+        for flag, value in stage["flags"].items():
+            name = flag.replace("-", "_")
+            read = args.channels if name == "channels" else getattr(cfg, name)
+            assert read == value, (stage["name"], flag)

@@ -391,7 +391,8 @@ class Trainer:
             self.rng.bit_generator.state = state["rng"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, TrainConfig]:
+    """The command line, and the training configuration it asks for."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=REPO / "checkpoints" / "translator.pt")
     parser.add_argument("--init", type=Path, help="start from these weights (no optimiser)")
@@ -408,7 +409,11 @@ def main(argv: list[str] | None = None) -> int:
     for name, value in asdict(TrainConfig()).items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=type(value), default=value)
     args = parser.parse_args(argv)
-    cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
+    return args, TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, cfg = parse_args(argv)
     if os.environ.get("MOTION_SMOKE"):
         cfg.steps, cfg.val_every = 3, 2
     clips = [c for p in args.clips for c in D.read_clips(p)] if args.clips else None
