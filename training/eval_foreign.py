@@ -611,6 +611,12 @@ def held_out_jitter(family: str, engine, clips: list) -> dict:
     from training.translator.fit import held_out_take
 
     takes = [c for c in clips if held_out_take(c.name)]
+    if not takes:
+        styles = ", ".join(sorted({c.style for c in clips}))
+        raise ValueError(
+            f"{family}: no held-out Bandai take is in one of its styles ({styles}) "
+            "to measure its jitter on"
+        )
     real, out = [], []
     for c in takes:
         content = segments(c.motion)[0]
