@@ -48,8 +48,8 @@ INPUT, OUTPUT = "control", "output"
 # highest top-1 keeping 0.85 or more.
 STRENGTH = 0.95
 # Styles played at a strength of their own, each chosen on the development half under a rule
-# written first (docs/translator.md: "Active at full strength", "Active past the networks'
-# pose"); the others at STRENGTH.
+# written first (docs/experiments/translator.md: "Active at full strength", "Active past the
+# networks' pose"); the others at STRENGTH.
 STYLE_STRENGTHS = {"active": 1.2}
 
 
