@@ -91,7 +91,8 @@ show-styles: $(VENV)/.dev
 # training resumes from checkpoints/dance.pt when it exists (TensorBoard in runs/dance/).
 # Extra flags: DANCE_ARGS="--max-steps 100 --minutes 60". eval-dance: the generated beat test
 # set (tracker F-measure, alignment to known beats vs shifted grids), every shared song, the
-# held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding.
+# held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
+# contact score, AIST++ feature distances to real dance (development and test halves).
 DANCE_ARGS ?=
 .PHONY: dance-alignment train-dance export-dance eval-dance
 dance-alignment: $(VENV)/.dev

@@ -25,8 +25,13 @@ a beat). Parts:
   :func:`genre_features`, relative to the hips' floor point) trained on the real dances of
   the training songs names the genre of dances generated for the held-out songs with each
   of the four genres requested;
-- **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) of those dances and
-  of the real held-out dances.
+- **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
+  foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
+  of the real held-out dances;
+- **distance to real dance** (:func:`feature_distances`): the AIST++ kinetic and geometric
+  feature distances of the dances generated for the held-out songs to their real dances,
+  beside the real dances of the genre's other songs to the same, per genre, and diversity;
+  the first half of each held-out song is the development half, the second the test half.
 
 A stall (``motion.dance_features.stalls``): 5 seconds of music in which the mean joint
 speed stays below 30 % of the dance's median.
@@ -47,6 +52,7 @@ from motion import contacts as CT
 from motion import dance_features as DF
 from motion import kinematics as K
 from motion.skeleton import Motion
+from training import dance_metrics as DM
 
 TEN_MINUTES = 600.0
 BLOCK = 30.0  # seconds per energy block
@@ -221,6 +227,8 @@ def held_out(engine, seeds: int, log=print) -> dict:
     genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])
     rows = {k: [] for k in ("real", "generated", "generated_no_warp")}
     sliding = {"real": [], "generated": []}
+    contact = {"real": [], "generated": []}
+    generated_dances: dict[str, list[Motion]] = {}
     confusion = {g: {h: 0 for h in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
     real_hits, songs = [], {}
     for name, genre, real, samples, sr in held:
@@ -228,6 +236,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         sliding["real"].append(CT.canonical_foot_sliding(real))
+        contact["real"].append(DM.physical_foot_contact(real))
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
@@ -238,8 +247,10 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 named = genre_clf.predict(genre_features(out))
                 confusion[asked][named] += 1
                 sliding["generated"].append(CT.canonical_foot_sliding(out))
+                contact["generated"].append(DM.physical_foot_contact(out))
                 if asked != genre:
                     continue
+                generated_dances.setdefault(name, []).append(out)
                 s, c = BW.alignment(out, beats)
                 rows["generated"].append((s, c))
                 song.setdefault("generated", []).append({"bas": round(s, 4), "chance": round(c, 4)})
@@ -261,6 +272,8 @@ def held_out(engine, seeds: int, log=print) -> dict:
             for k, v in rows.items()
         },  # fmt: skip
         "foot_sliding_cm_s": {k: round(float(np.mean(v)), 2) for k, v in sliding.items()},
+        "foot_contact_score": {k: round(float(np.mean(v)), 3) for k, v in contact.items()},
+        "feature_distances": feature_distances(held, train, generated_dances),
         "genre_accuracy": {
             "generated": round(hits / max(total, 1), 4),
             "real_held_out": round(float(np.mean(real_hits)), 4),
@@ -271,6 +284,81 @@ def held_out(engine, seeds: int, log=print) -> dict:
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
     }
+
+
+SEGMENT_SECONDS = 5.0  # the pieces whose features the distances compare
+HALVES = ("dev", "test")
+
+
+def _features(pieces: list[Motion]) -> dict[str, np.ndarray]:
+    rows = [DM.dance_features(p) for p in pieces]
+    return {k: np.array([r[k] for r in rows]).reshape(len(rows), -1) for k in DM.FEATURES}
+
+
+def feature_distances(held: list, train: list, generated: dict[str, list[Motion]]) -> dict:
+    """AIST++ kinetic and geometric feature distances per half and genre.
+
+    Pieces of ``SEGMENT_SECONDS``: of the real dance of each held-out song (the reference),
+    of the dances generated for it in its own genre (every seed), and of the real dances of
+    the training songs of that genre (the real-vs-real baseline: other songs). The
+    development half is the first half of each held-out song, the test half the second.
+    Features are normalised by the mean and std of every real piece of every song, the
+    generated and the other songs' sets compared to the reference at one size (the smaller
+    one's, ``matched_frechet``); diversity is the mean distance between a set's pieces.
+    """
+    genres = sorted({h[1] for h in held})
+    pieces = {half: {g: {"real": [], "generated": []} for g in genres} for half in HALVES}
+    for name, genre, real, _, _ in held:
+        middle = real.num_frames // 2
+        for half, (start, stop) in zip(HALVES, ((0, middle), (middle, None)), strict=True):
+            cut = pieces[half][genre]
+            cut["real"] += [p for _, p in DM.segments(real, SEGMENT_SECONDS, start, stop)]
+            for out in generated.get(name, []):
+                cut["generated"] += [p for _, p in DM.segments(out, SEGMENT_SECONDS, start, stop)]
+    others = {g: [p for genre, m in train if genre == g
+                  for _, p in DM.segments(m, SEGMENT_SECONDS)] for g in genres}  # fmt: skip
+    other_features = {g: _features(v) for g, v in others.items()}
+    every_real = [p for half in pieces.values() for g in half.values() for p in g["real"]]
+    everything = _features(every_real + [p for v in others.values() for p in v])
+    normalise = {k: DM.Normaliser(everything[k]) for k in DM.FEATURES}
+    report: dict = {"segment_seconds": SEGMENT_SECONDS}
+    for half, by_genre in pieces.items():
+        rows = {}
+        pooled: dict[str, list] = {"real": [], "generated": [], "other_songs": []}
+        for genre, sets in by_genre.items():
+            feats = {
+                "real": _features(sets["real"]),
+                "generated": _features(sets["generated"]),
+                "other_songs": other_features[genre],
+            }
+            for key in pooled:
+                pooled[key].append(feats[key])
+            rows[genre] = _distance_row(feats, normalise)
+        merged = {k: {f: np.concatenate([x[f] for x in v]) for f in DM.FEATURES}
+                  for k, v in pooled.items()}  # fmt: skip
+        rows["all"] = _distance_row(merged, normalise)
+        report[half] = rows
+    return report
+
+
+def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> dict:
+    counts = {k: len(v["kinetic"]) for k, v in feats.items()}
+    size = min(counts["generated"], counts["other_songs"])
+    row: dict = {"pieces": counts}
+    for kind in DM.FEATURES:
+        real, gen, other = (normalise[kind](feats[k][kind])
+                            for k in ("real", "generated", "other_songs"))  # fmt: skip
+        to_generated = DM.matched_frechet(gen, real, size)
+        to_other = DM.matched_frechet(other, real, size)
+        row[kind] = {
+            "generated_to_real": round(to_generated, 2),
+            "other_songs_to_real": round(to_other, 2),
+            "ratio": round(to_generated / max(to_other, 1e-9), 2),
+            "diversity_generated": round(DM.diversity(gen), 2),
+            "diversity_real": round(DM.diversity(real), 2),
+            "diversity_other_songs": round(DM.diversity(other), 2),
+        }
+    return row
 
 
 def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict:
@@ -344,6 +432,34 @@ def _pattern_table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def _distance_table(distances: dict) -> list[str]:
+    lines = [
+        f"Distance to real dance (AIST++ kinetic and geometric features of "
+        f"{distances['segment_seconds']:g}-s pieces, normalised by every real piece): Frechet "
+        "distance to the held-out songs' real dance of the dances generated for them, and of "
+        "the real dances of the other songs of the genre (real vs real), at one number of "
+        "pieces; the ratio of the two; diversity (mean distance between pieces) of the "
+        "generated and of the real held-out dance. Development half: the first half of each "
+        "song; test half: the second.",
+        "",
+        "| half | genre | pieces real / generated / other songs | FID_k generated / real vs "
+        "real (ratio) | FID_g generated / real vs real (ratio) | Div_k generated / real | "
+        "Div_g generated / real |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for half in HALVES:
+        for genre, row in distances[half].items():
+            k, g, n = row["kinetic"], row["geometric"], row["pieces"]
+            lines.append(
+                f"| {half} | {genre} | {n['real']} / {n['generated']} / {n['other_songs']} | "
+                f"{k['generated_to_real']:.1f} / {k['other_songs_to_real']:.1f} ({k['ratio']:.2f}) | "
+                f"{g['generated_to_real']:.1f} / {g['other_songs_to_real']:.1f} ({g['ratio']:.2f}) | "
+                f"{k['diversity_generated']:.1f} / {k['diversity_real']:.1f} | "
+                f"{g['diversity_generated']:.1f} / {g['diversity_real']:.1f} |"
+            )
+    return lines
+
+
 def markdown(report: dict) -> str:
     gen = report["generated_set"]["songs"]
     lines = [
@@ -372,20 +488,27 @@ def markdown(report: dict) -> str:
             f"stalls {sum(r['stalls'] for r in shared.values())}; slowest 5 s "
             f"{min(r['slowest_5s_share'] for r in shared.values()):.0%} of the median.",
         ]
-    ba = report["beat_alignment"]
+    ba, pfc = report["beat_alignment"], report["foot_contact_score"]
     lines += [
         "",
         f"Held-out songs ({len(report['songs'])} x {report['seeds']} seeds, the part the real "
         "dance covers; against the tracker's beats):",
         "",
-        "| dance | beat alignment | chance (shifted beats) | foot sliding (cm/s) |",
-        "|---|---|---|---|",
+        "| dance | beat alignment | chance (shifted beats) | foot sliding (cm/s) "
+        "| foot contact score |",
+        "|---|---|---|---|---|",
         f"| real | {ba['real']['bas']:.3f} | {ba['real']['chance']:.3f} | "
-        f"{report['foot_sliding_cm_s']['real']:.1f} |",
+        f"{report['foot_sliding_cm_s']['real']:.1f} | {pfc['real']:.3f} |",
         f"| generated (as served) | {ba['generated']['bas']:.3f} | "
-        f"{ba['generated']['chance']:.3f} | {report['foot_sliding_cm_s']['generated']:.1f} |",
+        f"{ba['generated']['chance']:.3f} | {report['foot_sliding_cm_s']['generated']:.1f} | "
+        f"{pfc['generated']:.3f} |",
         f"| generated, no beat warp | {ba['generated_no_warp']['bas']:.3f} | "
-        f"{ba['generated_no_warp']['chance']:.3f} | - |",
+        f"{ba['generated_no_warp']['chance']:.3f} | - | - |",
+        "",
+        "Foot contact score: EDGE's physical foot contact score (x 10^4, 5-s pieces; lower: "
+        "the hips accelerate only while a foot is planted).",
+        "",
+        *_distance_table(report["feature_distances"]),
     ]
     g, t = report["genre_accuracy"], report["ten_minutes"]
     confusion = "; ".join(
@@ -456,6 +579,8 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "seeds": report["seeds"],
         "beat_alignment": report["beat_alignment"],
         "foot_sliding_cm_s": report["foot_sliding_cm_s"],
+        "foot_contact_score": report["foot_contact_score"],
+        "feature_distances_test_half": report["feature_distances"]["test"],
         "genre_accuracy": {k: v for k, v in report["genre_accuracy"].items() if k != "confusion"},
         "ten_minutes": {k: v for k, v in report["ten_minutes"].items() if k != "per_seed"},
         "generated_set": {
@@ -473,8 +598,10 @@ def record_in_manifest(report: dict, models_dir: Path) -> None:
         "measured": time.strftime("%Y-%m-%d"),
         "machine": measuring_machine(),
         "by": "python -m training.eval_dance (beat alignment: motion.beat_warp.alignment, AIST++ "
-        "score vs shifted grids; foot sliding in cm/s; genre: logistic regression on real "
-        "training-song dances)",
+        "score vs shifted grids; foot sliding in cm/s; foot contact: EDGE's physical foot "
+        "contact score; feature distances: AIST++ kinetic and geometric features of 5-s pieces, "
+        "Frechet distance, test half = second half of each held-out song; genre: logistic "
+        "regression on real training-song dances)",
     }
     put_evaluation(
         report["model_name"], report["model_version"], "held_out_songs", figures, models_dir
