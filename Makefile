@@ -94,7 +94,7 @@ show-styles: $(VENV)/.dev
 # held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
 # contact score, AIST++ feature distances to real dance (development and test halves).
 DANCE_ARGS ?=
-.PHONY: dance-alignment train-dance export-dance eval-dance
+.PHONY: dance-alignment train-dance export-dance eval-dance show-dance
 dance-alignment: $(VENV)/.dev
 	$(PY) -m training.dance_alignment --write
 
@@ -106,6 +106,9 @@ export-dance: $(VENV)/.dev
 
 eval-dance: $(VENV)/.dev
 	$(PY) -m training.eval_dance --json runs/eval/dance.json --manifest
+
+show-dance: $(VENV)/.dev
+	$(PY) -m training.show_dance
 
 # The translator: ONNX graphs, statistics, style table and the manifest entry
 # "translator-bandai" from a copy of checkpoints/translator.pt (a training overwrites it).
