@@ -41,10 +41,12 @@ def content_clip(frames: int, data_dir: Path) -> tuple[str, bytes]:
 
 
 def main(argv: list[str] | None = None) -> dict:
+    from service.clips import Upload
     from service.config import Settings
-    from service.engines.translator import StyleSource, TransferRequest, TranslatorEngine
+    from service.engines.translator import TranslatorEngine
     from service.manifest import load_manifest
-    from service.pipeline import Upload
+    from service.metrics import StageTimer
+    from service.requests import StyleSource, TransferRequest
     from tests.conftest import DATA_DIR
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -73,8 +75,9 @@ def main(argv: list[str] | None = None) -> dict:
 
         def once(style=style) -> tuple[float, dict, int]:
             started = time.perf_counter()
-            out = engine.infer(TransferRequest(Upload("content", data=data), style))
-            return time.perf_counter() - started, dict(out.timer.ms), out.frames
+            timer = StageTimer(engine.name)
+            out = engine.infer(TransferRequest(Upload("content", data=data), style), timer)
+            return time.perf_counter() - started, dict(timer.ms), out.frames
 
         once()  # warm-up: the bucket's shapes
         runs = [once() for _ in range(args.repeats)]

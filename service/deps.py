@@ -10,8 +10,8 @@ from typing import Annotated
 from fastapi import Depends, Request
 
 from service.config import Settings
+from service.dataplane import DataPlane
 from service.inference import InferenceRunner
-from service.registered_styles import StyleStore
 from service.registry import ModelRegistry
 
 
@@ -27,11 +27,11 @@ async def get_runner(request: Request) -> InferenceRunner:
     return request.app.state.runner
 
 
-async def get_styles(request: Request) -> StyleStore:
-    return request.app.state.styles
+async def get_dataplane(request: Request) -> DataPlane:
+    return request.app.state.dataplane
 
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RegistryDep = Annotated[ModelRegistry, Depends(get_registry)]
 InferenceDep = Annotated[InferenceRunner, Depends(get_runner)]
-StylesDep = Annotated[StyleStore, Depends(get_styles)]
+DataPlaneDep = Annotated[DataPlane, Depends(get_dataplane)]

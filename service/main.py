@@ -14,6 +14,7 @@ from fastapi import FastAPI
 
 from service import metrics
 from service.config import Settings, available_cpus
+from service.dataplane import DataPlane
 from service.engines import EngineFactory, import_family_engines
 from service.errors import install_error_handlers
 from service.inference import InferenceRunner
@@ -67,14 +68,15 @@ def create_app(
         lifespan=lifespan,
     )
     app.state.settings = settings
-    app.state.registry = ModelRegistry(settings, engines)
-    app.state.styles = StyleStore.from_settings(settings)
+    registered = StyleStore.from_settings(settings)
+    app.state.registry = ModelRegistry(settings, engines, registered)
     app.state.runner = InferenceRunner(
         settings.max_concurrent_inferences,
         settings.request_timeout_s,
         settings.queue_wait_s,
         settings.max_queued,
     )
+    app.state.dataplane = DataPlane(app.state.registry, app.state.runner, registered)
 
     install_error_handlers(app)
     # add_middleware puts each new one outside the previous: the request context is outermost

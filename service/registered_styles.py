@@ -7,10 +7,11 @@ no cache to go stale. A file is written whole under a temporary name and linked 
 so a reader never sees half of one, and the link claims the name: of two workers
 registering one name at once, one gets a 409. The count limit is checked under a lock file.
 
-A style's code is the mean of its clips' style codes (the translator's ``style3d`` network,
-:meth:`TranslatorEngine.code_of_motion`), kept with the model name and version that
-computed it: codes of another training do not share its space, so a style registered under
-another version is refused (409) until it is registered again from its clips.
+Plain storage: the translator engine codes a style's clips and hands the style here. A
+style's code is the mean of its clips' style codes (the translator's ``style3d`` network),
+kept with the model name and version that computed it: codes of another training do not
+share its space, so a style registered under another version is refused (409) until it is
+registered again from its clips.
 
 Its ``speed`` (the time warp of a named style against the content's own) is 1 unless the
 studio gives one: the shipped styles' speeds compare each style with the others performing
@@ -31,17 +32,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from service.config import Settings
-from service.errors import Conflict, InsufficientStorage, InvalidRequest, PayloadTooLarge
-from service.metrics import StageTimer
-from service.pipeline import Upload, load_clip
-
-if TYPE_CHECKING:
-    from service.engines.translator import TranslatorEngine
+from service.errors import Conflict, InsufficientStorage, InvalidRequest
 
 logger = logging.getLogger(__name__)
 
@@ -266,94 +262,3 @@ class StyleStore:
         except OSError as exc:
             raise self._unwritable(exc) from None
         return True
-
-
-# --- registering (in the inference pool) --------------------------------------------------
-
-
-@dataclass
-class RegisterStyleRequest:
-    """``POST /v1/styles``: a name, the clips (BVH or glTF), an optional joint-name
-    ``mapping`` for them and the time-warp ``speed``."""
-
-    name: str
-    clips: list[Upload]
-    mapping: dict[str, str] | None = None
-    speed: float = 1.0
-
-
-@dataclass
-class Registration:
-    """A registered style, the shipped styles nearest its code, and warnings."""
-
-    style: RegisteredStyle
-    nearest: list[dict[str, Any]]
-    warnings: list[str]
-    timer: StageTimer
-
-
-def register(
-    engine: TranslatorEngine,
-    request: RegisterStyleRequest,
-    store: StyleStore,
-    settings: Settings,
-) -> Registration:
-    """Code each clip (parse, map, onto the canonical skeleton, ``style3d``; a bad clip is its
-    usual problem, its detail naming the clip), average, and store (409 if the name was
-    taken meanwhile or the store filled up). Blocking: the inference pool runs it."""
-    timer = StageTimer(engine.name)
-    codes, velocities, warnings = [], [], []
-    frames = 0
-    for k, upload in enumerate(request.clips, 1):
-        what = f"clip {k} ({upload.filename or 'unnamed'})"
-        try:
-            clip = load_clip(upload, settings, timer, mapping=request.mapping, prefix="clip_")
-        except Exception as exc:
-            _name_the_clip(exc, what)
-            raise
-        with timer.stage("clip_encode"):
-            style = engine.code_of_motion(clip.canonical, timer)
-        codes.append(np.asarray(style.code, np.float64))
-        if style.velocity is not None:
-            velocities.append(style.velocity)
-        warnings += [f"{what}: {w}" for w in style.warnings]
-        frames += clip.canonical.num_frames
-    code = np.mean(codes, axis=0)
-    spread = float(np.mean(np.linalg.norm(np.asarray(codes) - code, axis=1)))
-    registered = RegisteredStyle(
-        name=request.name,
-        code=code.astype(np.float32),
-        velocity=float(np.mean(velocities)) if velocities else 0.0,
-        speed=float(request.speed),
-        model=engine.name,
-        version=engine.version,
-        clips=len(codes),
-        frames=frames,
-        spread=round(spread, 4),
-        sources=tuple(u.filename or "" for u in request.clips),
-    )
-    with timer.stage("store"):
-        store.add(registered)
-    return Registration(registered, engine.nearest(registered.code), warnings, timer)
-
-
-def _name_the_clip(exc: Exception, what: str) -> None:
-    """Put ``what`` (which clip) in front of a problem's message, so a client knows which
-    of its clips was refused."""
-    if hasattr(exc, "message") and isinstance(exc.message, str):  # MotionError
-        exc.message = f"{what}: {exc.message}"
-        exc.args = (exc.message,)
-    elif hasattr(exc, "detail") and isinstance(exc.detail, str):  # ServiceError
-        exc.detail = f"{what}: {exc.detail}"
-
-
-def check_clip_count(count: int, settings: Settings) -> None:
-    """400 for no clip, 413 over ``max_style_clips``."""
-    if count == 0:
-        raise InvalidRequest("give one or more 'clips' to register a style from", field="clips")
-    if count > settings.max_style_clips:
-        raise PayloadTooLarge(
-            f"{count} clips, over the limit of {settings.max_style_clips} (max_style_clips)",
-            limit=settings.max_style_clips,
-            limit_name="max_style_clips",
-        )

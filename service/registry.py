@@ -1,4 +1,4 @@
-"""The model registry: the one layer between routes and engines (the data plane).
+"""The model registry: every model of the manifest and its engine, for the data plane.
 
 At start-up it reads the manifest, checks every file's sha256, builds one engine per model
 (the family's registered engine, or :class:`~service.engines.GenericEngine`) and loads it,
@@ -20,6 +20,7 @@ from service.config import Settings
 from service.engines import ENGINE_FACTORIES, Engine, EngineFactory, GenericEngine
 from service.errors import NotFound, NotReady
 from service.manifest import FAMILIES, Manifest, ManifestError, load_manifest, verify_files
+from service.registered_styles import StyleStore
 
 logger = logging.getLogger(__name__)
 
@@ -31,10 +32,16 @@ class ModelRegistry:
     """Every model of the manifest, its engine and its status. Cheap to build; :meth:`start`
     (or :meth:`load`, blocking) does the work."""
 
-    def __init__(self, settings: Settings, factories: Mapping[str, EngineFactory] | None = None):
+    def __init__(
+        self,
+        settings: Settings,
+        factories: Mapping[str, EngineFactory] | None = None,
+        styles: StyleStore | None = None,
+    ):
         self.settings = settings
         self.models_dir = settings.models_dir
         self._factories = factories  # None: the global ENGINE_FACTORIES, read at load time
+        self.registered = styles  # the registered styles, handed to every engine
         self.state: State = "idle"
         self.manifest: Manifest | None = None
         self.engines: dict[str, Engine] = {}
@@ -89,7 +96,9 @@ class ModelRegistry:
         for entry in manifest.models:
             factory = factories.get(entry.family, GenericEngine)
             try:
-                engines[entry.name] = factory(entry, self.models_dir, self.settings)
+                engines[entry.name] = factory(
+                    entry, self.models_dir, self.settings, styles=self.registered
+                )
             except Exception as exc:
                 logger.exception("cannot build the engine of %s", entry.name)
                 self.errors[entry.name] = f"{type(exc).__name__}: {exc}"

@@ -15,7 +15,7 @@ for ``cmu-31``, is dropped (the body jumps 55-256 cm into it). Clips longer than
 into equal segments of at most 8 s; beyond four segments, four evenly spaced 8 s windows.
 A few CMU-31 and Xia takes come again as other rigs send them: Mixamo names (``ZXY``
 channels), and Unreal names with an extra root, Z up and in metres; each is written as BVH
-text and read back through the service's own path (``service.pipeline.load_clip``).
+text and read back through the service's own path (``service.clips.load_clip``).
 They land within 0.001 cm of the original on the canonical skeleton, so they check the rig
 path (``variants_agree``) and weigh their takes three times in the headline figures
 (``top1_originals_only`` leaves them out; ``by_source`` shows each source apart).
@@ -220,13 +220,12 @@ def rig_variants(motion: Motion) -> dict[str, Motion]:
 def through_service(motion: Motion) -> Motion:
     """``motion`` written as BVH text and read onto the canonical skeleton as a request is."""
     from motion import bvh
-    from service import pipeline
+    from service.clips import Upload, load_clip
     from service.config import Settings
     from service.metrics import StageTimer
 
-    settings = Settings()
-    upload = pipeline.text_upload(bvh.dumps(motion), settings, field="content")
-    return pipeline.load_clip(upload, settings, StageTimer("eval-foreign")).canonical
+    upload = Upload("content", data=bvh.dumps(motion).encode())
+    return load_clip(upload, Settings(), StageTimer("eval-foreign")).canonical
 
 
 def load_items(halves: tuple[str, ...], root: Path | None = None) -> dict[str, list[Item]]:

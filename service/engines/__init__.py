@@ -10,11 +10,9 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from pathlib import Path
 
-from service.config import Settings
 from service.engines.base import Engine, GenericEngine, create_session
-from service.manifest import FAMILIES, ModelEntry
+from service.manifest import FAMILIES
 
 __all__ = [
     "ENGINE_FACTORIES",
@@ -27,7 +25,8 @@ __all__ = [
     "register_engine",
 ]
 
-EngineFactory = Callable[[ModelEntry, Path, Settings], Engine]
+# factory(entry, models_dir, settings, styles=the registered styles or None)
+EngineFactory = Callable[..., Engine]
 
 ENGINE_FACTORIES: dict[str, EngineFactory] = {}
 

@@ -5,7 +5,7 @@ A family engine subclasses :class:`Engine`, loads whatever else its bundle holds
 :meth:`Engine.load_assets` (statistics, style codes), may give real warm-up inputs in
 :meth:`Engine.warm_inputs`, lists its styles in :meth:`Engine.styles`, and serves its
 family's requests in three steps (KServe's preprocess, predict, postprocess), which
-:meth:`Engine.infer` runs and times in the inference pool:
+:meth:`Engine.infer` runs (the data plane calls it in the inference pool, timed):
 
 - :meth:`Engine.prepare`: read and parse the uploads, onto the canonical skeleton, features;
 - :meth:`Engine.predict`: run the networks, and nothing else (so a change of graphs is local);
@@ -28,6 +28,7 @@ from service.config import Settings
 from service.errors import NotFound
 from service.manifest import GraphSpec, ModelEntry
 from service.metrics import StageTimer
+from service.registered_styles import StyleStore
 
 if TYPE_CHECKING:
     import onnxruntime
@@ -114,10 +115,18 @@ class Engine:
     # graphs whose session threads busy-wait between runs (see create_session)
     spinning_graphs: ClassVar[frozenset[str]] = frozenset()
 
-    def __init__(self, entry: ModelEntry, models_dir: Path, settings: Settings) -> None:
+    def __init__(
+        self,
+        entry: ModelEntry,
+        models_dir: Path,
+        settings: Settings,
+        styles: StyleStore | None = None,
+    ) -> None:
         self.entry = entry
         self.models_dir = Path(models_dir)
         self.settings = settings
+        # the service's registered styles (one store for the app); None: the settings' folder
+        self.registered = styles if styles is not None else StyleStore.from_settings(settings)
         self.sessions: dict[str, onnxruntime.InferenceSession] = {}
         self.warmup_ms: dict[str, float] = {}
         self.ready = False
@@ -199,16 +208,12 @@ class Engine:
         """The error when no engine of the family accepts ``request``."""
         return NotFound(f"model {self.name!r} cannot serve this request")
 
-    def infer(self, request: Any) -> Any:
-        """``request`` through :meth:`prepare`, :meth:`predict` and :meth:`finish` (blocking:
-        the inference pool runs it); the result carries the model and the stage timings."""
-        timer = StageTimer(self.name)
+    def infer(self, request: Any, timer: StageTimer) -> Any:
+        """``request`` through :meth:`prepare`, :meth:`predict` and :meth:`finish`, stages
+        timed into ``timer`` (blocking: the data plane runs it in the inference pool)."""
         job = self.prepare(request, timer)
         outputs = self.predict(job, timer)
-        result = self.finish(job, outputs, timer)
-        result.model = (self.name, self.version)
-        result.timer = timer
-        return result
+        return self.finish(job, outputs, timer)
 
     def prepare(self, request: Any, timer: StageTimer) -> Any:
         raise NotImplementedError(f"{type(self).__name__} serves no requests")

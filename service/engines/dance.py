@@ -24,27 +24,14 @@ from motion import dance_features as DF
 from motion import kinematics as K
 from motion.skeleton import Motion
 from service import limits
+from service.clips import Clip, Result, answer_format, load_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.metrics import StageTimer
-from service.pipeline import Clip, Result, Upload, answer_format, load_clip, write_result
+from service.requests import DanceRequest
 
 BUCKET = 256  # audio frames: the audio graph runs at multiples of this
 NOISE = 0.05  # std of the seeded noise on the fed-back pose (standardised units)
-
-
-@dataclass
-class DanceRequest:
-    """``POST /v1/dance``: music, an optional genre (predicted when None), a seed, an
-    optional skeleton to retarget onto and the frame rate of the answer."""
-
-    audio: Upload
-    genre: str | None = None
-    seed: int = 0
-    skeleton: Upload | None = None
-    fps: float = 30.0
-    mapping: dict[str, str] | None = None
-    format: str | None = None  # of the answer; None: the skeleton's, BVH without one
 
 
 @dataclass

@@ -25,6 +25,7 @@ import numpy as np
 
 from motion import features as Fe
 from motion.skeleton import Motion
+from service.clips import Clip, Result, Upload, load_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.engines.translator import (
@@ -37,19 +38,7 @@ from service.engines.translator import (
 )
 from service.errors import NotFound
 from service.metrics import StageTimer
-from service.pipeline import Clip, Result, Upload, load_clip, write_result
-
-
-@dataclass
-class StylizeRequest:
-    """``POST /v1/stylize``: a content clip and one named style."""
-
-    content: Upload
-    style_name: str
-    foot_cleanup: bool = True
-    time_warp: bool = True
-    mapping: dict[str, str] | None = None
-    format: str | None = None  # of the answer; None: the content's
+from service.requests import StylizeRequest
 
 
 @dataclass

@@ -34,8 +34,6 @@ path and one finish, which the fast family reuses.
 
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -49,12 +47,23 @@ from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from motion.styles import exaggerated
 from service import limits
+from service.clips import Clip, Result, load_clip, name_the_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
-from service.errors import InvalidRequest, NotFound
+from service.errors import NotFound
 from service.metrics import StageTimer
-from service.pipeline import Clip, Result, Upload, load_clip, write_result
-from service.registered_styles import StyleStore
+from service.registered_styles import RegisteredStyle
+from service.requests import (
+    RegisterStyleRequest,
+    Registration,
+    StyleCode,
+    StyleCodeRequest,
+    StyleCodeResult,
+    StyleSource,
+    TransferRequest,
+)
+
+TranslatorRequest = TransferRequest | StyleCodeRequest | RegisterStyleRequest
 
 BUCKET = 64  # frames: padded lengths are multiples of this
 MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
@@ -74,20 +83,6 @@ SAME_STYLE_NEAR, SAME_STYLE_FAR = 0.3, 0.5
 # Overlapping windows of the training length (``extra.window``) run through the restyler,
 # half a window apart; a bundle must name its length.
 WINDOWS_PER_CALL = 256  # bounds the batch (memory) on long clips
-
-
-@dataclass
-class StyleCode:
-    """A style code ``(S,)`` float32, the velocity factor of its source (None when unknown,
-    e.g. a video: no time warp), what it came from, warnings for the client, and for named
-    styles and mixes their ``speed`` against the other styles on the same content (the
-    time warp then, instead of the ratio of velocity factors)."""
-
-    code: np.ndarray
-    velocity: float | None
-    source: str
-    warnings: list[str] = field(default_factory=list)
-    speed: float | None = None
 
 
 @dataclass
@@ -154,80 +149,6 @@ def window_starts(frames: int, window: int, hop: int | None = None) -> list[int]
     return starts
 
 
-def parse_mix(text: str) -> dict[str, float]:
-    """The ``style_mix`` field: a JSON object name -> weight, weights finite and >= 0 with a
-    positive sum; 400 otherwise. Weights are returned as given (normalised later)."""
-    try:
-        value = json.loads(text)
-    except ValueError as exc:
-        raise InvalidRequest(f"'style_mix' is not JSON: {exc}", field="style_mix") from None
-    if not isinstance(value, dict) or not value:
-        raise InvalidRequest(
-            "'style_mix' must be a non-empty JSON object of style name -> weight",
-            field="style_mix",
-        )
-    mix: dict[str, float] = {}
-    for name, weight in value.items():
-        number = isinstance(weight, int | float) and not isinstance(weight, bool)
-        if not number or not math.isfinite(weight) or weight < 0:
-            raise InvalidRequest(
-                f"'style_mix' weight of {name!r} must be a finite number >= 0, got {weight!r}",
-                field="style_mix",
-            )
-        mix[name] = float(weight)
-    if sum(mix.values()) <= 0:
-        raise InvalidRequest("'style_mix' weights must have a positive sum", field="style_mix")
-    return mix
-
-
-@dataclass
-class StyleSource:
-    """The one style input of a request: ``kind`` (a field of ``STYLE_FIELDS``) and what it
-    needs; files are read when the work starts."""
-
-    kind: str
-    upload: Upload | None = None
-    name: str | None = None
-    mix: dict[str, float] | None = None
-    keypoints_fps: float | None = None  # None: the document's rate, else 30
-    mapping: dict[str, str] | None = None
-
-    def names(self) -> list[str]:
-        """The named styles it refers to."""
-        return [self.name] if self.name else list(self.mix or ())
-
-
-@dataclass
-class TransferRequest:
-    """``POST /v1/transfer``: a content clip in the style of ``style``."""
-
-    content: Upload
-    style: StyleSource
-    strength: float = 1.0
-    time_warp: bool = True
-    foot_cleanup: bool = True
-    mapping: dict[str, str] | None = None
-    format: str | None = None  # of the answer; None: the content's
-
-
-@dataclass
-class StyleCodeRequest:
-    """``POST /v1/style-code``: the style code of one style input."""
-
-    style: StyleSource
-
-
-@dataclass
-class StyleCodeResult:
-    """A style code, the named styles nearest to it, and (set by ``Engine.infer``) the
-    model and stage timings."""
-
-    code: StyleCode
-    nearest: list[dict[str, Any]]
-    model: tuple[str, str] = ("", "")
-    timer: StageTimer | None = None
-
-
 @dataclass
 class TranslatorJob:
     """A prepared request: the style (a code already, for names and mixes; else the style
@@ -249,6 +170,16 @@ class TranslatorJob:
     strength: float = 1.0
     time_warp: bool = True
     foot_cleanup: bool = True
+
+
+@dataclass
+class RegistrationJob:
+    """A prepared registration: each clip's style job (as :meth:`TranslatorEngine.prepare`
+    makes one for a style clip) with the clip's name for messages, and the clips' frames."""
+
+    request: RegisterStyleRequest
+    clips: list[tuple[str, TranslatorJob]]
+    frames: int
 
 
 @dataclass
@@ -297,7 +228,6 @@ class TranslatorEngine(Engine):
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
             raise ValueError(f"style codes have {self.style_dim} dims, the graphs {declared}")
-        self.registered = StyleStore.from_settings(self.settings)
 
     def styles(self) -> list[dict[str, Any]]:
         return [
@@ -319,7 +249,9 @@ class TranslatorEngine(Engine):
         """A shipped style (or another name of one) or a registered one."""
         return self.row(name) is not None or name in self.registered
 
-    def accepts(self, request: TransferRequest | StyleCodeRequest) -> bool:
+    def accepts(self, request: TranslatorRequest) -> bool:
+        if isinstance(request, RegisterStyleRequest):
+            return True
         return all(self.known(name) for name in request.style.names())
 
     def refusal(self, request: TransferRequest | StyleCodeRequest) -> NotFound:
@@ -334,11 +266,13 @@ class TranslatorEngine(Engine):
     # --- prepare ---------------------------------------------------------------------------
 
     def prepare(
-        self, request: TransferRequest | StyleCodeRequest, timer: StageTimer
-    ) -> TranslatorJob:
+        self, request: TranslatorRequest, timer: StageTimer
+    ) -> TranslatorJob | RegistrationJob:
         """Read the style input (a name or mix: its code; a clip or keypoints: the style
         network's input) and, for a transfer, the content clip onto the canonical skeleton
-        and into standardised windows."""
+        and into standardised windows; for a registration, each clip's style input."""
+        if isinstance(request, RegisterStyleRequest):
+            return self._registration_job(request, timer)
         job = self._style_job(request.style, timer)
         if isinstance(request, TransferRequest):
             clip = load_clip(
@@ -368,6 +302,24 @@ class TranslatorEngine(Engine):
             return self._keypoints_job(kp, timer)
         clip = load_clip(style.upload, self.settings, timer, mapping=style.mapping, prefix="style_")
         return self._motion_job(clip.canonical, timer)
+
+    def _registration_job(
+        self, request: RegisterStyleRequest, timer: StageTimer
+    ) -> RegistrationJob:
+        """Each clip parsed, mapped, onto the canonical skeleton (a bad clip is its usual
+        problem, its detail naming the clip) and into the style network's input."""
+        clips, frames = [], 0
+        for k, upload in enumerate(request.clips, 1):
+            what = f"clip {k} ({upload.filename or 'unnamed'})"
+            try:
+                clip = load_clip(upload, self.settings, timer, mapping=request.mapping,
+                                 prefix="clip_")  # fmt: skip
+            except Exception as exc:
+                name_the_clip(exc, what)
+                raise
+            clips.append((what, self._motion_job(clip.canonical, timer)))
+            frames += clip.canonical.num_frames
+        return RegistrationJob(request, clips, frames)
 
     def _motion_job(self, canon: Motion, timer: StageTimer) -> TranslatorJob:
         """The style of a canonical clip at 30 fps: its style3d input and velocity factor."""
@@ -413,10 +365,15 @@ class TranslatorEngine(Engine):
 
     # --- predict: every network call --------------------------------------------------------
 
-    def predict(self, job: TranslatorJob, timer: StageTimer) -> Networks:
+    def predict(
+        self, job: TranslatorJob | RegistrationJob, timer: StageTimer
+    ) -> Networks | list[StyleCode]:
         """The style encoder of a clip or video, then for a transfer the style encoder on
         the content (its own code, which tells its own speed) and the restyler on the
-        content's windows with the target code."""
+        content's windows with the target code; for a registration, each clip's code."""
+        if isinstance(job, RegistrationJob):
+            with timer.stage("clip_encode"):
+                return [self.predict(clip, timer).style for _, clip in job.clips]
         with timer.stage("encode"):
             style = job.style
             if style is None:
@@ -447,8 +404,13 @@ class TranslatorEngine(Engine):
     # --- finish ----------------------------------------------------------------------------
 
     def finish(
-        self, job: TranslatorJob, out: Networks, timer: StageTimer
-    ) -> Result | StyleCodeResult:
+        self,
+        job: TranslatorJob | RegistrationJob,
+        out: Networks | list[StyleCode],
+        timer: StageTimer,
+    ) -> Result | StyleCodeResult | Registration:
+        if isinstance(job, RegistrationJob):
+            return self._registered(job, out, timer)
         if job.content is None:
             named = out.style.source in ("style_name", "style_mix")
             return StyleCodeResult(out.style, self.nearest(out.style.code, named=named))
@@ -462,6 +424,34 @@ class TranslatorEngine(Engine):
             suffix="transfer",
             warp=result.warp,
         )
+
+    def _registered(
+        self, job: RegistrationJob, styles: list[StyleCode], timer: StageTimer
+    ) -> Registration:
+        """The style of the clips: the mean of their codes (as encoded) and velocity
+        factors, stored (409 if the name was taken meanwhile or the store filled up)."""
+        codes = np.asarray([s.code for s in styles], np.float64)
+        velocities = [s.velocity for s in styles if s.velocity is not None]
+        warnings = [f"{what}: {w}" for (what, _), s in zip(job.clips, styles, strict=True)
+                    for w in s.warnings]  # fmt: skip
+        code = codes.mean(axis=0)
+        spread = float(np.mean(np.linalg.norm(codes - code, axis=1)))
+        request = job.request
+        style = RegisteredStyle(
+            name=request.name,
+            code=code.astype(np.float32),
+            velocity=float(np.mean(velocities)) if velocities else 0.0,
+            speed=float(request.speed),
+            model=self.name,
+            version=self.version,
+            clips=len(codes),
+            frames=job.frames,
+            spread=round(spread, 4),
+            sources=tuple(u.filename or "" for u in request.clips),
+        )
+        with timer.stage("store"):
+            self.registered.add(style)
+        return Registration(style, self.nearest(style.code), warnings)
 
     def _stylized(self, job: TranslatorJob, out: Networks, timer: StageTimer) -> Transfer:
         """The decoded windows -> the canonical result: blended, smoothed, the content's root

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, File, Form, Request, Response, UploadFile
 
 from motion import dance_features as DF
-from service import pipeline
-from service.deps import SettingsDep
-from service.engines.dance import DanceRequest
+from service.deps import DataPlaneDep, SettingsDep
 from service.errors import InvalidRequest
+from service.requests import DanceRequest
+from service.routes import answers
+from service.routes.fields import FormatQuery, MappingField, parse_mapping, text_upload, upload
 
 router = APIRouter(tags=["dance"])
 
@@ -34,14 +35,15 @@ def check_genre(genre: str | None) -> str | None:
 @router.post(
     "/v1/dance",
     summary="Generate a dance for a whole song (BVH as long as the decoded audio)",
-    response_class=pipeline.Response,
-    responses=pipeline.bvh_responses(
+    response_class=Response,
+    responses=answers.clip_responses(
         "BVH on the canonical skeleton, or on `skeleton` when given (in its format)"
     ),
 )
 async def create_dance(
     request: Request,
     settings: SettingsDep,
+    plane: DataPlaneDep,
     audio: Annotated[UploadFile, File(description="music: wav, flac, ogg or mp3")],
     genre: Annotated[str | None, Form(description=f"one of {', '.join(DF.GENRES)}")] = None,
     seed: Annotated[int, Form(ge=0, le=2**31 - 1)] = 0,
@@ -50,25 +52,25 @@ async def create_dance(
         File(description="BVH (file or text) or glTF rig (animated or not) to retarget onto"),
     ] = None,
     fps: Annotated[float, Form(gt=0, le=MAX_FPS)] = 30.0,
-    mapping: Annotated[str | None, Form(description="JSON joint-name map")] = None,
-    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
-) -> pipeline.Response:
+    mapping: MappingField = None,
+    format: FormatQuery = None,  # noqa: A002
+) -> Response:
     rig = None
     if isinstance(skeleton, str):
         if skeleton.strip().lower() not in ABSENT:
-            rig = pipeline.text_upload(skeleton, settings, field="skeleton")
+            rig = text_upload(skeleton, settings, field="skeleton")
     elif skeleton is not None:
-        rig = pipeline.upload(skeleton, settings, field="skeleton")
+        rig = upload(skeleton, settings, field="skeleton")
     job = DanceRequest(
-        audio=pipeline.upload(
+        audio=upload(
             audio, settings, field="audio", accept=AUDIO_TYPES, what="wav, flac, ogg or mp3"
         ),
         genre=check_genre(genre),
         seed=seed,
         skeleton=rig,
         fps=fps,
-        mapping=pipeline.parse_mapping(mapping),
+        mapping=parse_mapping(mapping),
         format=format,
     )
-    result = await pipeline.infer(request, "dance", job)
-    return pipeline.respond(request, result, upload_name=audio.filename)
+    result = await plane.infer("dance", job, endpoint=answers.route_template(request))
+    return answers.respond(result, upload_name=audio.filename)

@@ -7,24 +7,17 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Form, Path, Request, UploadFile
+from fastapi import APIRouter, File, Form, Path, UploadFile
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict
 
-from service import pipeline
-from service.deps import InferenceDep, RegistryDep, SettingsDep, StylesDep
-from service.engines import Engine
-from service.engines.translator import StyleCodeRequest, StyleSource
-from service.errors import Conflict, NotFound, problem_responses
-from service.registered_styles import (
-    NAME_RULE,
-    RegisterStyleRequest,
-    StyleStore,
-    check_clip_count,
-    check_name,
-    register,
-)
-from service.registry import ModelRegistry
+from service.config import Settings
+from service.deps import DataPlaneDep, RegistryDep, SettingsDep
+from service.errors import InvalidRequest, PayloadTooLarge, problem_responses
+from service.registered_styles import NAME_RULE, check_name
+from service.requests import RegisterStyleRequest, Registration
+from service.routes import answers
+from service.routes.fields import MappingField, parse_mapping, upload
 
 router = APIRouter(tags=["styles"])
 
@@ -73,26 +66,16 @@ async def list_styles(registry: RegistryDep) -> StylesResponse:
     return StylesResponse.model_validate(styles)
 
 
-def translator_engine(registry: ModelRegistry) -> Engine:
-    """The first ready translator: 503 while the models load, 404 when none is installed."""
-    engines = registry.by_family("translator")
-    if engines:
-        return engines[0]
-    registry.require_ready()
-    raise NotFound("no translator model is installed", models=sorted(registry.engines))
-
-
-def shipped_family(name: str, registry: ModelRegistry, store: StyleStore) -> str | None:
-    """The family that ships a style (or a translator alias) named ``name``, or None."""
-    if name in store:
-        return None
-    for family, styles in registry.styles().items():
-        if any(s["name"] == name and not s.get("registered") for s in styles):
-            return family
-    probe = StyleCodeRequest(StyleSource("style_name", name=name))
-    if any(engine.accepts(probe) for engine in registry.by_family("translator")):
-        return "translator"  # another name of a shipped style
-    return None
+def check_clip_count(count: int, settings: Settings) -> None:
+    """400 for no clip, 413 over ``max_style_clips``."""
+    if count == 0:
+        raise InvalidRequest("give one or more 'clips' to register a style from", field="clips")
+    if count > settings.max_style_clips:
+        raise PayloadTooLarge(
+            f"{count} clips, over the limit of {settings.max_style_clips} (max_style_clips)",
+            limit=settings.max_style_clips,
+            limit_name="max_style_clips",
+        )
 
 
 @router.post(
@@ -103,16 +86,13 @@ def shipped_family(name: str, registry: ModelRegistry, store: StyleStore) -> str
     responses=problem_responses(400, 404, 409, 413, 415, 422, 503, 504, 507),
 )
 async def register_style(
-    request: Request,
     settings: SettingsDep,
-    registry: RegistryDep,
-    runner: InferenceDep,
-    store: StylesDep,
+    plane: DataPlaneDep,
     name: Annotated[str, Form(min_length=1, max_length=100, description=NAME_RULE)],
     clips: Annotated[
         list[UploadFile], File(description="clips in the style (BVH or glTF), any humanoid rig")
     ],
-    mapping: Annotated[str | None, Form(description="JSON joint-name map (the clips)")] = None,
+    mapping: MappingField = None,
     speed: Annotated[
         float,
         Form(
@@ -124,26 +104,21 @@ async def register_style(
     ] = 1.0,
 ) -> JSONResponse:
     name = check_name(name.strip())
-    family = shipped_family(name, registry, store)
-    if family is not None:
-        raise Conflict(f"{name!r} is a shipped {family} style: choose another name", style=name)
-    store.check_room(name)
+    plane.check_new_style(name)
     check_clip_count(len(clips), settings)
     job = RegisterStyleRequest(
         name=name,
-        clips=[pipeline.upload(clip, settings, field="clips") for clip in clips],
-        mapping=pipeline.parse_mapping(mapping),
+        clips=[upload(clip, settings, field="clips") for clip in clips],
+        mapping=parse_mapping(mapping),
         speed=speed,
     )
-    engine = translator_engine(registry)
-    done = await runner.run(register, engine, job, store, settings)
-    style = done.style
+    done: Registration = await plane.infer("translator", job)
     body: dict[str, Any] = {
-        **style.to_json(),
+        **done.style.to_json(),
         "registered": True,
         "nearest": done.nearest,
         "warnings": done.warnings,
-        "timings_ms": {k: round(v, 2) for k, v in done.timer.ms.items()},
+        "timings_ms": answers.timings_ms(done),
     }
     body.pop("sources")
     headers = {"Server-Timing": done.timer.server_timing()}
@@ -158,15 +133,8 @@ async def register_style(
     responses=problem_responses(404, 409, 503, 507),
 )
 async def delete_style(
-    registry: RegistryDep,
-    store: StylesDep,
+    plane: DataPlaneDep,
     name: Annotated[str, Path(max_length=200)],
 ) -> Response:
-    if store.remove(name):
-        return Response(status_code=204)
-    if not registry.ready:
-        registry.require_ready()  # which names are shipped is known once the models are
-    family = shipped_family(name, registry, store)
-    if family is not None:
-        raise Conflict(f"{name!r} is a shipped {family} style and cannot be deleted", style=name)
-    raise NotFound(f"no registered style named {name!r}", registered=[s.name for s in store.all()])
+    plane.delete_style(name)
+    return Response(status_code=204)

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, Form, Request, Response
 
-from service import pipeline
-from service.deps import SettingsDep
-from service.engines.fast import StylizeRequest
+from service.deps import DataPlaneDep
+from service.requests import StylizeRequest
+from service.routes import answers
+from service.routes.fields import ContentDep
 
 router = APIRouter(tags=["stylize"])
 
@@ -16,28 +17,22 @@ router = APIRouter(tags=["stylize"])
 @router.post(
     "/v1/stylize",
     summary="Re-style a clip (BVH or GLB) with one named style (fast feed-forward networks)",
-    response_class=pipeline.Response,
-    responses=pipeline.bvh_responses("the content's format (or ?format=) on its skeleton and rate"),
+    response_class=Response,
+    responses=answers.clip_responses("the content's format (or ?format=) on its skeleton and rate"),
 )
 async def stylize_clip(
     request: Request,
-    settings: SettingsDep,
-    content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
+    plane: DataPlaneDep,
+    clip: ContentDep,
     style_name: Annotated[str, Form(min_length=1, max_length=100)],
-    foot_cleanup: Annotated[bool, Form()] = True,
-    time_warp: Annotated[
-        bool, Form(description="play the result at the style's speed (frame count changes)")
-    ] = True,
-    mapping: Annotated[str | None, Form(description="JSON joint-name map")] = None,
-    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
-) -> pipeline.Response:
+) -> Response:
     job = StylizeRequest(
-        content=pipeline.upload(content, settings),
+        content=clip.content,
         style_name=style_name,
-        foot_cleanup=foot_cleanup,
-        time_warp=time_warp,
-        mapping=pipeline.parse_mapping(mapping),
-        format=format,
+        foot_cleanup=clip.foot_cleanup,
+        time_warp=clip.time_warp,
+        mapping=clip.mapping,
+        format=clip.format,
     )
-    result = await pipeline.infer(request, "fast", job)
-    return pipeline.respond(request, result, upload_name=content.filename)
+    result = await plane.infer("fast", job, endpoint=answers.route_template(request))
+    return answers.respond(result, upload_name=clip.filename)

@@ -23,20 +23,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Request, Response, UploadFile
 from fastapi.responses import JSONResponse
 
-from service import pipeline
 from service.config import Settings
-from service.deps import SettingsDep
-from service.engines.translator import (
-    StyleCodeRequest,
-    StyleCodeResult,
-    StyleSource,
-    TransferRequest,
-    parse_mix,
-)
+from service.deps import DataPlaneDep, SettingsDep
 from service.errors import InvalidRequest, problem_responses
+from service.requests import StyleCodeRequest, StyleCodeResult, StyleSource, TransferRequest
+from service.routes import answers
+from service.routes.fields import ContentDep, parse_mapping, parse_mix, upload
 
 router = APIRouter(tags=["transfer"])
 
@@ -89,68 +84,66 @@ async def read_style_fields(
     return StyleFields(style, keypoints, style_name, style_mix, keypoints_fps, style_mapping)
 
 
-def style_source(fields: StyleFields, settings: Settings) -> StyleSource:
+def style_source(given: StyleFields, settings: Settings) -> StyleSource:
     """The one style input: exactly one of :data:`STYLE_FIELDS` (400 naming the fields
     otherwise), a mix parsed (400), an upload checked (415/413)."""
-    name = fields.style_name.strip() if fields.style_name and fields.style_name.strip() else None
-    mix = fields.style_mix if fields.style_mix and fields.style_mix.strip() else None
-    values = {"style": fields.style, "keypoints": fields.keypoints, "style_name": name,
+    name = given.style_name.strip() if given.style_name and given.style_name.strip() else None
+    mix = given.style_mix if given.style_mix and given.style_mix.strip() else None
+    values = {"style": given.style, "keypoints": given.keypoints, "style_name": name,
               "style_mix": mix}  # fmt: skip
-    given = [field for field, value in values.items() if value is not None]
-    if len(given) != 1:
-        which = "none" if not given else ", ".join(given)
+    present = [field for field, value in values.items() if value is not None]
+    if len(present) != 1:
+        which = "none" if not present else ", ".join(present)
         raise InvalidRequest(
             f"give exactly one style input of {', '.join(STYLE_FIELDS)}; got {which}",
-            fields=given,
+            fields=present,
             expected_one_of=list(STYLE_FIELDS),
         )
-    kind = given[0]
+    kind = present[0]
     if kind == "style_name":
         return StyleSource(kind, name=name)
     if kind == "style_mix":
         return StyleSource(kind, mix=parse_mix(mix))
     if kind == "keypoints":
-        upload = pipeline.upload(
-            fields.keypoints,
+        clip = upload(
+            given.keypoints,
             settings,
             field="keypoints",
             accept=KEYPOINT_TYPES,
             what="an OpenPose zip or JSON file",
         )
-        return StyleSource(kind, upload=upload, keypoints_fps=fields.keypoints_fps)
-    upload = pipeline.upload(fields.style, settings, field="style")
-    mapping = pipeline.parse_mapping(fields.style_mapping, "style_mapping")
-    return StyleSource(kind, upload=upload, mapping=mapping)
+        return StyleSource(kind, upload=clip, keypoints_fps=given.keypoints_fps)
+    clip = upload(given.style, settings, field="style")
+    mapping = parse_mapping(given.style_mapping, "style_mapping")
+    return StyleSource(kind, upload=clip, mapping=mapping)
 
 
 @router.post(
     "/v1/transfer",
     summary="Re-style a clip (BVH or GLB) by an example clip, a video's keypoints, a name or a mix",
-    response_class=pipeline.Response,
-    responses=pipeline.bvh_responses("the content's format (or ?format=) on its skeleton and rate"),
+    response_class=Response,
+    responses=answers.clip_responses("the content's format (or ?format=) on its skeleton and rate"),
 )
 async def transfer(
     request: Request,
     settings: SettingsDep,
-    content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
+    plane: DataPlaneDep,
+    clip: ContentDep,
     style_fields: Annotated[StyleFields, Depends(read_style_fields)],
     strength: Annotated[float, Form(ge=0, le=1, description="0 keeps the content's style")] = 1.0,
-    time_warp: Annotated[bool, Form(description="warp time by the velocity ratio")] = True,
-    foot_cleanup: Annotated[bool, Form(description="pin the content's foot contacts")] = True,
-    mapping: Annotated[str | None, Form(description="JSON joint-name map (content)")] = None,
-    format: Annotated[pipeline.Format | None, Query(description=pipeline.FORMAT_DOC)] = None,  # noqa: A002
-) -> pipeline.Response:
+) -> Response:
     job = TransferRequest(
-        content=pipeline.upload(content, settings),
+        content=clip.content,
         style=style_source(style_fields, settings),
         strength=strength,
-        time_warp=time_warp,
-        foot_cleanup=foot_cleanup,
-        mapping=pipeline.parse_mapping(mapping),
-        format=format,
+        time_warp=clip.time_warp,
+        foot_cleanup=clip.foot_cleanup,
+        mapping=clip.mapping,
+        format=clip.format,
     )
-    result = await pipeline.infer(request, "translator", job)
-    return pipeline.respond(request, result, upload_name=content.filename)
+    endpoint = answers.route_template(request)
+    result = await plane.infer("translator", job, endpoint=endpoint)
+    return answers.respond(result, upload_name=clip.filename)
 
 
 @router.post(
@@ -159,12 +152,12 @@ async def transfer(
     responses=problem_responses(400, 404, 413, 415, 422, 503, 504),
 )
 async def style_code_of(
-    request: Request,
     settings: SettingsDep,
+    plane: DataPlaneDep,
     style_fields: Annotated[StyleFields, Depends(read_style_fields)],
 ) -> JSONResponse:
     job = StyleCodeRequest(style_source(style_fields, settings))
-    result: StyleCodeResult = await pipeline.infer(request, "translator", job)
+    result: StyleCodeResult = await plane.infer("translator", job)
     code, (name, version) = result.code, result.model
     body: dict[str, Any] = {
         "code": [round(float(v), 6) for v in code.code],
@@ -173,7 +166,7 @@ async def style_code_of(
         "velocity_factor": None if code.velocity is None else round(code.velocity, 4),
         "speed": None if code.speed is None else round(code.speed, 4),
         "model": {"name": name, "version": version},
-        "timings_ms": pipeline.timings_ms(result),
+        "timings_ms": answers.timings_ms(result),
         "warnings": code.warnings,
     }
-    return JSONResponse(body, headers=pipeline.timing_headers(result))
+    return JSONResponse(body, headers=answers.timing_headers(result))

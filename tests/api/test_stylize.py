@@ -207,9 +207,9 @@ def test_the_other_names_of_a_style_give_the_same_result(shared_client, walk):
 def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, walk):
     """Each end of a clip is mirrored over as many frames as the bundle says its networks
     see: fewer and its first and last frames would read zeros."""
-    from service.engines.fast import StylizeRequest
+    from service.clips import Upload
     from service.metrics import StageTimer
-    from service.pipeline import Upload
+    from service.requests import StylizeRequest
 
     for frames in (3, 40, 60):  # 40 frames padded to 64 would leave 12 at each end
         source = bvh.dumps(bvh.loads(walk).slice(0, frames)).encode()
@@ -227,8 +227,8 @@ def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
     is played that far from the content's pose, further than at 1; without one, at the
     bundle's (0.95): nearer the content."""
     from motion import kinematics as K
-    from service.engines.fast import StylizeRequest
-    from service.pipeline import Upload
+    from service.clips import Upload
+    from service.requests import StylizeRequest
 
     request = StylizeRequest(Upload("content", data=walk, filename="walk.bvh"), "active")
     engine = shared_client.app.state.registry.engine_for("fast", request)

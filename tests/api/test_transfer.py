@@ -28,10 +28,10 @@ from service.engines.translator import (
     TranslatorEngine,
     pad_mirrored,
     padded_length,
-    parse_mix,
     window_starts,
 )
 from service.errors import InvalidRequest
+from service.routes.fields import parse_mix
 from tests import rigs
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path

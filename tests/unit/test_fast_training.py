@@ -110,8 +110,9 @@ def test_the_targets_are_what_a_transfer_decodes():
     """The fast networks learn ``restyled(restyler_input(clip))``: exactly the restyler's
     blended output the translator's own transfer path makes for the clip and code."""
     from motion import bvh, retarget
-    from service.engines.translator import StyleCode, TranslatorJob
+    from service.engines.translator import TranslatorJob
     from service.metrics import StageTimer
+    from service.requests import StyleCode
     from tests.rigs import FIXTURE
     from training.judges import load_engine
 

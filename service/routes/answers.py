@@ -1,0 +1,88 @@
+"""HTTP answers of the data plane's results: a clip as a BVH or GLB attachment, or as a JSON
+object with ``?format=json``, with the headers every inference answer carries."""
+
+from __future__ import annotations
+
+import re
+from pathlib import PurePath
+from typing import Any
+
+from fastapi import Request
+from fastapi.responses import JSONResponse, Response
+
+from service.clips import Result
+from service.errors import problem_responses
+
+BVH_MEDIA_TYPE = "text/plain; charset=utf-8"
+GLB_MEDIA_TYPE = "model/gltf-binary"
+
+
+def clip_responses(description: str) -> dict:
+    """OpenAPI ``responses`` of a route that answers BVH or GLB (or JSON with
+    ``?format=json``)."""
+    return {
+        200: {
+            "content": {"text/plain": {}, GLB_MEDIA_TYPE: {}, "application/json": {}},
+            "description": description,
+        },
+        **problem_responses(400, 404, 413, 415, 422, 503, 504),
+    }
+
+
+def route_template(request: Request) -> str:
+    """The path template of the route that serves ``request`` (a metric label)."""
+    route = request.scope.get("route")
+    return getattr(route, "path", None) or request.scope.get("path", "")
+
+
+def _filename(upload_name: str | None, suffix: str, extension: str = "bvh") -> str:
+    stem = PurePath(upload_name or "motion").stem or "motion"
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", stem)[:80] or "motion"
+    return f"{stem}_{re.sub(r'[^A-Za-z0-9._-]+', '_', suffix)}.{extension}"
+
+
+def timing_headers(result: Any) -> dict[str, str]:
+    """``X-Model-Version`` and ``Server-Timing`` of a result."""
+    name, version = result.model
+    return {
+        "X-Model-Version": f"{name}/{version}",
+        "Server-Timing": result.timer.server_timing() if result.timer else "",
+    }
+
+
+def timings_ms(result: Any) -> dict[str, float]:
+    return {k: round(v, 2) for k, v in (result.timer.ms if result.timer else {}).items()}
+
+
+def respond(result: Result, *, upload_name: str | None = None) -> Response:
+    """The answer in ``result.format``: BVH as a ``text/plain`` attachment, or GLB as a
+    ``model/gltf-binary`` one, with ``X-Model-Version``, ``X-Frames``, ``X-Fps`` and
+    ``Server-Timing`` (``X-Request-Id`` is the middleware's); or for ``json`` the object
+    ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings", "source_format"}`` (and
+    ``rig``; same headers)."""
+    name, version = result.model
+    headers = {
+        **timing_headers(result),
+        "X-Frames": str(result.frames),
+        "X-Fps": f"{result.fps:g}",
+    }
+    if result.format == "json":
+        body = {
+            "bvh": result.bvh,
+            "frames": result.frames,
+            "fps": result.fps,
+            "model": {"name": name, "version": version},
+            "timings_ms": timings_ms(result),
+            "warnings": result.warnings,
+            "source_format": result.source_format,
+        }
+        if result.rig is not None:
+            body["rig"] = result.rig
+        return JSONResponse(body, headers=headers)
+    if result.format == "glb":
+        filename = _filename(upload_name, result.suffix, "glb")
+        headers["Content-Disposition"] = f'attachment; filename="{filename}"'
+        return Response(result.glb, media_type=GLB_MEDIA_TYPE, headers=headers)
+    filename = _filename(upload_name, result.suffix)
+    headers["Content-Disposition"] = f'attachment; filename="{filename}"'
+    return Response(result.bvh, media_type=BVH_MEDIA_TYPE, headers=headers)
