@@ -3,9 +3,9 @@
 Per motion frame at 30 fps (canonical skeleton), numpy only, so PyTorch training and the
 onnxruntime service compute the same numbers.
 
-Audio input ``(F, AUDIO_CHANNELS)``: ``motion.audio.AudioFeatures.matrix()`` (log-mel 64,
-the thesis's spectral summary 30: MFCCs, chroma, centroid, bandwidth, rolloff, flatness,
-RMS; onset strength; beat phase as sin/cos). Beat sin/cos are left unstandardised, and
+Audio input ``(F, AUDIO_CHANNELS)``: ``motion.audio_features.AudioFeatures.matrix()``
+(log-mel 64, the thesis's spectral summary 30: MFCCs, chroma, centroid, bandwidth, rolloff,
+flatness, RMS; onset strength; beat phase as sin/cos). Beat sin/cos are left unstandardised, and
 both 0 means "beat unknown" (music whose pairing with its dance was not verified; motion
 without music). :func:`song_features` computes them for a song excerpt with the beat grid
 of the whole song.
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import audio
+from motion import audio_features, beat_tracking
 from motion import beat_warp as BW
 from motion import canonical as C
 from motion import contacts as CT
@@ -55,7 +55,7 @@ GENRES = ("cha-cha", "rumba", "tango", "waltz", "salsa", "indian", "modern")
 MUSIC_GENRES = GENRES[:4]
 """Genres with music in the training data: the ones the audio classifier head predicts."""
 
-AUDIO_CHANNELS = audio.FEATURE_DIM
+AUDIO_CHANNELS = audio_features.FEATURE_DIM
 BEAT_COLUMNS = slice(AUDIO_CHANNELS - 2, AUDIO_CHANNELS)  # beat_sin, beat_cos
 
 ROTATION_CHANNELS = 6 * len(BODY)
@@ -114,12 +114,12 @@ def song_features(
         excerpt[lo - start : hi - start] = samples[lo:hi]
     if not np.any(excerpt):
         excerpt[0] = 1e-6  # all silence: features at the floor, no beats
-    feats = audio.frame_features(excerpt, sr, FPS, num_frames)
+    feats = audio_features.frame_features(excerpt, sr, FPS, num_frames)
     x = feats.matrix()
     if beats is not None:
         beats = np.asarray(beats, dtype=np.float64) - offset
         period = 60.0 / tempo if tempo else None
-        phase = audio.beat_phase(beats, num_frames, FPS, period=period).astype(np.float64)
+        phase = beat_tracking.beat_phase(beats, num_frames, FPS, period=period).astype(np.float64)
         x[:, BEAT_COLUMNS] = np.stack(
             [np.sin(2 * np.pi * phase), np.cos(2 * np.pi * phase)], axis=-1
         )

@@ -82,12 +82,12 @@ def check_audio_seconds(
 
 
 def decode_audio(data: bytes, settings: Settings) -> tuple[np.ndarray, int]:
-    """Decode uploaded audio (:func:`motion.audio.decode`), never past the audio limit:
+    """Decode uploaded audio (:func:`motion.audio_decode.decode`), never past the audio limit:
     decoding stops as soon as it passes ``max_audio_seconds`` and a 413 problem names it."""
-    from motion import audio
+    from motion import audio_decode
 
     try:
-        return audio.decode(data, max_seconds=settings.max_audio_seconds)
+        return audio_decode.decode(data, max_seconds=settings.max_audio_seconds)
     except MotionError as exc:
         if exc.kind == "too-large":
             raise audio_over_limit(None, settings) from None

@@ -94,13 +94,13 @@ def retime(motion, rate: float):
 
 
 def _prepare_dwm(clip, alignment, root: Path) -> Sequence:
-    from motion import audio
+    from motion import audio_decode
     from training.dance_alignment import analyse_music
 
     motion = retime(clip.motion, alignment.rate)
     folder = root / Path(clip.extra["audio"]).parent
     music = analyse_music(folder)
-    samples, sr = audio.decode(folder / "audio.mp3")
+    samples, sr = audio_decode.decode(folder / "audio.mp3")
     x = DF.song_features(
         samples,
         sr,

@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from motion import audio
+from motion import audio_decode, beat_tracking, spectral
 from motion import beat_warp as BW
 
 REPO = Path(__file__).resolve().parent.parent
@@ -87,7 +87,7 @@ HYPOTHESES = (
 @dataclass
 class Dance:
     """One pair: raw marker positions ``points (F, 23, 3)`` at 25 fps, the song's beats ``(B,)``
-    and onset envelope ``(T,)`` at ``audio.ONSET_FRAME_RATE`` over the whole song."""
+    and onset envelope ``(T,)`` at ``spectral.ONSET_FRAME_RATE`` over the whole song."""
 
     name: str
     genre: str
@@ -131,13 +131,15 @@ def analyse_music(folder: Path) -> dict[str, np.ndarray]:
     if path.exists():
         with np.load(path) as z:
             return {k: z[k] for k in z.files}
-    samples, sr = audio.decode(folder / "audio.mp3")
-    onset = audio.onset_strength(samples, sr, aggregate=np.mean)
+    samples, sr = audio_decode.decode(folder / "audio.mp3")
+    onset = spectral.onset_strength(samples, sr, aggregate=np.mean)
     # the study's tracker, librosa's (median rise of dB, one tempo up to 320 bpm): the table
     # and the training's beat phase were made with it; the service tracks beats on the
-    # kick and bass (audio.beat_onset_strength)
-    median = audio.onset_strength(samples, sr, aggregate=np.median)
-    tempo, beats = audio.track_beats(median, bpm=audio.estimate_tempo(median, max_bpm=320.0))
+    # kick and bass (spectral.beat_onset_strength)
+    median = spectral.onset_strength(samples, sr, aggregate=np.median)
+    tempo, beats = beat_tracking.track_beats(
+        median, bpm=beat_tracking.estimate_tempo(median, max_bpm=320.0)
+    )
     out = {
         "beats": beats,
         "tempo": np.array(tempo),
@@ -311,7 +313,7 @@ def onset_xcorr(d: Dance, offset: float, rate: float) -> tuple[float, float]:
     speed = gaussian_filter1d(BW.joint_speed(d.points, SOURCE_FPS), 1.0)
     speed = (speed - speed.mean()) / max(float(speed.std()), 1e-12)
     t = (np.arange(len(speed)) + 0.5) / SOURCE_FPS
-    env_t = np.arange(len(d.onset)) / audio.ONSET_FRAME_RATE
+    env_t = np.arange(len(d.onset)) / spectral.ONSET_FRAME_RATE
     values = []
     for lag in LAGS:
         env = np.interp(offset + lag + rate * t, env_t, d.onset, left=0.0, right=0.0)

@@ -411,9 +411,9 @@ def load_dance_with_melody(root: Path | None = None) -> list[Clip]:
 
 def clip_audio(clip: Clip, root: Path | None = None) -> tuple[np.ndarray, int]:
     """The part of a dance clip's song that its motion covers, as mono samples and rate."""
-    from motion import audio
+    from motion import audio_decode
 
-    samples, sr = audio.decode((root or data_dir()) / clip.extra["audio"])
+    samples, sr = audio_decode.decode((root or data_dir()) / clip.extra["audio"])
     start = int(round(clip.extra["audio_offset_s"] * sr))
     stop = start + int(round(clip.num_frames / C.FPS * sr))
     return samples[start:stop], sr

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import audio as A
+from motion import audio_decode, audio_features, beat_tracking
 from motion import beat_warp as BW
 from motion import contacts as CT
 from motion import dance_features as DF
@@ -108,7 +108,7 @@ def any_level_f_measure(estimated: np.ndarray, reference: np.ndarray) -> float:
     ref = np.sort(np.asarray(reference, dtype=np.float64))
     doubled = np.sort(np.concatenate([ref, ref[:-1] + 0.5 * np.diff(ref)]))
     candidates = [ref, ref[0::2], ref[1::2], doubled]
-    return max(A.beat_f_measure(estimated, c) for c in candidates)
+    return max(beat_tracking.beat_f_measure(estimated, c) for c in candidates)
 
 
 def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
@@ -118,14 +118,14 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
 
     rows = []
     for i, song in enumerate(songs if songs is not None else beat_test_set()):
-        feats = A.frame_features(song.samples, song.sr, DF.FPS)
+        feats = audio_features.frame_features(song.samples, song.sr, DF.FPS)
         row = {
             "pattern": song.pattern,
             "bpm": song.bpm,
             "tempo": round(feats.tempo, 1),
-            "f_measure": round(A.beat_f_measure(feats.beats, song.beats), 3),
+            "f_measure": round(beat_tracking.beat_f_measure(feats.beats, song.beats), 3),
             "f_any_level": round(any_level_f_measure(feats.beats, song.beats), 3),
-            "downbeat_f": round(A.beat_f_measure(feats.downbeats, song.downbeats), 3),
+            "downbeat_f": round(beat_tracking.beat_f_measure(feats.downbeats, song.downbeats), 3),
             "dances": [],
         }
         for seed in range(seeds):
@@ -155,11 +155,11 @@ def shared_songs(engine, log=print, names=None) -> dict:
     for folder in sorted(root.glob("DANCE_*")):
         if names is not None and folder.name not in names:
             continue
-        samples, sr = A.decode(folder / "audio.mp3")
+        samples, sr = audio_decode.decode(folder / "audio.mp3")
         genre = DWM_GENRES[folder.name.split("_")[1]]
         result = engine.dance(samples, sr, StageTimer(engine.name), genre=genre, seed=0)
         frames = result.motion.num_frames
-        playing = A.frame_features(samples, sr, DF.FPS, frames).playing
+        playing = audio_features.frame_features(samples, sr, DF.FPS, frames).playing
         rows[folder.name] = {
             "genre": genre,
             "seconds": round(len(samples) / sr, 1),
@@ -190,7 +190,7 @@ def held_out_songs():
             train.append((clip.genre, motion))
             continue
         folder = data_dir() / Path(clip.extra["audio"]).parent
-        samples, sr = A.decode(folder / "audio.mp3")
+        samples, sr = audio_decode.decode(folder / "audio.mp3")
         start = int(round(alignment.offset * sr))
         stop = start + int(round(motion.num_frames / motion.fps * sr))
         held.append((clip.name, clip.genre, motion, samples[max(start, 0) : stop], sr))
@@ -232,7 +232,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
     confusion = {g: {h: 0 for h in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
     real_hits, songs = [], {}
     for name, genre, real, samples, sr in held:
-        beats = A.frame_features(samples, sr, DF.FPS).beats
+        beats = audio_features.frame_features(samples, sr, DF.FPS).beats
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         sliding["real"].append(CT.canonical_foot_sliding(real))
@@ -368,7 +368,7 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
     sr = music[0][1]
     loop = np.concatenate([m for m, s in music if s == sr])
     long_song = np.resize(loop, int(TEN_MINUTES * sr))
-    playing = A.frame_features(long_song, sr, DF.FPS).playing
+    playing = audio_features.frame_features(long_song, sr, DF.FPS).playing
     per_seed = []
     for seed in range(seeds):
         out = engine.dance(long_song, sr, StageTimer(engine.name), genre="waltz", seed=seed)

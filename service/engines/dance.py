@@ -1,7 +1,7 @@
 """The dance family (jacob2019, made to work): music in, a dance for the whole song out.
 
 A request's song goes: decoded samples -> per-frame features at 30 fps for its whole decoded
-length (``motion.audio``; beats tracked on the song itself) -> standardised -> ``audio``
+length (``motion.audio_features``; beats tracked on the song itself) -> standardised -> ``audio``
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
 fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio
+from motion import audio_decode, audio_features
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
@@ -144,7 +144,7 @@ class DanceEngine(Engine):
             answer_format(None, request.format)  # format=glb without a glTF rig: 400 now
         with timer.stage("decode_audio"):
             samples, sr = limits.decode_audio(request.audio.read(), self.settings)
-            audio.check_not_silent(samples)
+            audio_decode.check_not_silent(samples)
         seconds = len(samples) / sr
         frames = max(1, math.ceil(seconds * request.fps - 1e-9))
         limits.check_frames(frames, self.settings, what="result")
@@ -177,7 +177,7 @@ class DanceEngine(Engine):
     ) -> DanceJob:
         with timer.stage("features"):
             frames = max(2, math.ceil(len(samples) / sr * DF.FPS - 1e-9))
-            feats = audio.frame_features(samples, sr, DF.FPS, frames)
+            feats = audio_features.frame_features(samples, sr, DF.FPS, frames)
             x = self.stats.normalize_audio(feats.matrix())
         rng = np.random.default_rng(seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])

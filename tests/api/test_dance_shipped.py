@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from motion import audio, bvh
+from motion import audio_decode, bvh
 from motion import canonical as C
 from motion import kinematics as K
 from motion import retarget as R
@@ -62,7 +62,7 @@ def assert_never_freezes(speeds: np.ndarray) -> None:
 def test_whole_song_dance_on_the_canonical_skeleton(shipped, fmt):
     seconds, bpm = SONGS[fmt]
     data = encoded(song(seconds, bpm=bpm, seed=len(fmt)), fmt.upper())
-    samples, sr = audio.decode(data)
+    samples, sr = audio_decode.decode(data)
     decoded = len(samples) / sr
     assert abs(decoded - seconds) < 0.1  # what the encoder kept, not a header
     r = shipped.post(
@@ -86,7 +86,7 @@ def test_whole_song_dance_on_the_canonical_skeleton(shipped, fmt):
 def test_whole_song_dance_on_a_requested_skeleton(shipped):
     rig = FIXTURE.read_bytes()
     data = encoded(song(130.0, bpm=120.0, seed=7), "OGG")
-    samples, sr = audio.decode(data)
+    samples, sr = audio_decode.decode(data)
     r = shipped.post(
         "/v1/dance",
         files={

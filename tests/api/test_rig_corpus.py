@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from motion import audio, bvh
+from motion import audio_decode, bvh
 from service.config import Settings
 from service.manifest import load_manifest
 from tests import rigs
@@ -84,7 +84,7 @@ def test_style_code_reads_a_style_on_any_rig(shared_client, corpus, name):
 
 def test_dance_comes_on_any_rig(shared_client, corpus):
     data = encoded(song(6.0, bpm=120.0, seed=3), "WAV")
-    samples, sr = audio.decode(data)
+    samples, sr = audio_decode.decode(data)
     for name in ("fixture/everything", "convention/Reallusion CC/iClone"):
         sent = bvh.dumps(corpus[name].motion).encode()
         r = shared_client.post(

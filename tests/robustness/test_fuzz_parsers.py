@@ -1,5 +1,5 @@
 """Fuzzing the three readers of client files: ``motion.bvh.loads``, ``motion.keypoints.load``,
-``motion.audio.decode``. Whatever the bytes, each returns a valid object or raises
+``motion.audio_decode.decode``. Whatever the bytes, each returns a valid object or raises
 ``MotionError`` with a known kind, and never takes long (:func:`time_limit` per call, plus a
 5 s hypothesis deadline). Inputs: random bytes, and valid seed files (``corpus``) mutated at
 the text, token, JSON, zip and byte level.
@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from motion import audio, bvh, keypoints
+from motion import audio_decode, bvh, keypoints
 from motion.errors import MotionError
 from motion.skeleton import Motion
 from tests.robustness import corpus
@@ -266,8 +266,8 @@ def assert_valid_audio(decoded) -> None:
     samples, sr = decoded
     assert isinstance(samples, np.ndarray) and samples.dtype == np.float32 and samples.ndim == 1
     assert samples.size > 0 and np.isfinite(samples).all()
-    assert float(np.abs(samples).max()) <= audio.MAX_ABS_SAMPLE
-    assert audio.MIN_SAMPLE_RATE <= sr <= audio.MAX_SAMPLE_RATE
+    assert float(np.abs(samples).max()) <= audio_decode.MAX_ABS_SAMPLE
+    assert audio_decode.MIN_SAMPLE_RATE <= sr <= audio_decode.MAX_SAMPLE_RATE
 
 
 @st.composite
@@ -298,7 +298,7 @@ def mutated_audio(draw) -> bytes:
 @fuzz_settings(200)
 @given(raw=mutated_audio())
 def test_audio_mutated_files(raw: bytes) -> None:
-    decoded = parse_or_refuse(audio.decode, raw, max_seconds=60.0)
+    decoded = parse_or_refuse(audio_decode.decode, raw, max_seconds=60.0)
     if decoded is not None:
         assert_valid_audio(decoded)
 
@@ -316,7 +316,7 @@ def test_audio_wav_headers(channels, sr, bits, fmt_tag, data_size, payload) -> N
     raw = corpus.wav_header(
         channels=channels, sr=sr, bits=bits, fmt_tag=fmt_tag, data_size=data_size, payload=payload
     )
-    decoded = parse_or_refuse(audio.decode, raw, max_seconds=60.0)
+    decoded = parse_or_refuse(audio_decode.decode, raw, max_seconds=60.0)
     if decoded is not None:
         assert_valid_audio(decoded)
 
@@ -329,14 +329,14 @@ def test_audio_wav_headers(channels, sr, bits, fmt_tag, data_size, payload) -> N
     ),
 )
 def test_audio_random_bytes(raw: bytes, prefix: bytes) -> None:
-    decoded = parse_or_refuse(audio.decode, prefix + raw, max_seconds=60.0)
+    decoded = parse_or_refuse(audio_decode.decode, prefix + raw, max_seconds=60.0)
     if decoded is not None:
         assert_valid_audio(decoded)
 
 
 @pytest.mark.parametrize("name", list(corpus.hostile_audio()))
 def test_audio_hostile_corpus(name: str) -> None:
-    decoded = parse_or_refuse(audio.decode, corpus.hostile_audio()[name], max_seconds=60.0)
+    decoded = parse_or_refuse(audio_decode.decode, corpus.hostile_audio()[name], max_seconds=60.0)
     if decoded is not None:
         assert_valid_audio(decoded)
 
@@ -345,5 +345,5 @@ def test_audio_limit_stops_decoding_early() -> None:
     """A long file is refused at the limit, without decoding the rest."""
     long_wav = corpus.encode(corpus.tone(seconds=30.0), 8000, "WAV", "PCM_16")
     with time_limit(LIMIT_S), pytest.raises(MotionError) as info:
-        audio.decode(long_wav, max_seconds=1.0)
+        audio_decode.decode(long_wav, max_seconds=1.0)
     assert info.value.kind == "too-large" and info.value.limit == 1.0

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motion import audio, retarget
 from motion import dance_features as DF
 from motion import kinematics as K
+from motion import retarget, spectral
 from motion.errors import MotionError
 from tests.rigs import load_fixture
 
@@ -53,7 +53,7 @@ def test_song_features_use_the_song_beats():
     np.testing.assert_allclose(x[6, DF.BEAT_COLUMNS], [np.sin(angle), np.cos(angle)], atol=1e-5)
     # before the song: silence at the floor, and no crash
     early = DF.song_features(y, sr, 10, offset=-2.0)
-    assert np.all(early[:, : audio.N_MELS] <= audio.DB_FLOOR + 1e-3)
+    assert np.all(early[:, : spectral.N_MELS] <= spectral.DB_FLOOR + 1e-3)
     assert np.all(DF.drop_beats(x)[:, DF.BEAT_COLUMNS] == 0)
 
 

@@ -234,7 +234,7 @@ def test_a_cached_judge_is_kept_for_the_same_code_and_motion_and_only_for_them()
     assert EF.judge_key([replace(clips[0], style="sad"), clips[1]]) != key
     read = {p.name for p in EF.motion_sources("features", "canonical", "styles")}
     assert {"features.py", "kinematics.py", "rotations.py", "styles.py"} <= read
-    assert not {"audio.py", "retarget.py", "gltf.py"} & read  # their edits keep the judge
+    assert not {"audio_features.py", "retarget.py", "gltf.py"} & read  # their edits keep the judge
 
 
 def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch):
