@@ -47,7 +47,7 @@ def render(rows: list[tuple[str, Motion]], start: float, seconds: float, title: 
 
 def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
     """``(label, motion)`` rows: per genre the real dance of its song, then the generated."""
-    from motion import audio as A
+    from motion import audio_decode
     from service.metrics import StageTimer
     from training import dance as TD
     from training import dance_alignment as DA
@@ -67,7 +67,9 @@ def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
         name = chosen[genre]
         clip, alignment = clips[name], DA.alignment_for(name, table)
         real = TD.retime(clip.motion, alignment.rate)
-        samples, sr = A.decode(data_dir() / Path(clip.extra["audio"]).parent / "audio.mp3")
+        samples, sr = audio_decode.decode(
+            data_dir() / Path(clip.extra["audio"]).parent / "audio.mp3"
+        )
         first = int(round(max(alignment.offset, 0.0) * sr))
         part = samples[first : first + int(round(real.num_frames / real.fps * sr))]
         out = engine.dance(part, sr, StageTimer(engine.name), genre=genre, seed=seed).motion
