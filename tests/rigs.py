@@ -830,3 +830,32 @@ def corpus(sources: dict[str, Motion]) -> dict[str, CorpusRig]:
     for convention in CONVENTION_RIGS:
         out[f"convention/{convention}"] = convention_rig(base, convention)
     return out
+
+
+def walk_cycle(motion: Motion | None = None, rig_names: dict[str, str] | None = None) -> Motion:
+    """A closed walk loop as a game export writes one (its last frame repeats its first,
+    the root's travel aside): one gait cycle of the CMU walk fixture, cut at the frame
+    pair one cycle apart whose poses match best, the remaining mismatch of every joint's
+    rotation and of the root's height spread over the cycle (the root's travel on the
+    floor kept), on the fixture's rig (renamed by ``rig_names``, e.g. CMU_TO_MIXAMO)."""
+    motion = motion or load_fixture()
+    gpos = K.global_positions(motion)
+    about_root = gpos - gpos[:, :1] * np.array([1.0, 0.0, 1.0])
+    best = None
+    for a in range(5, motion.num_frames - 45):
+        gaps = np.linalg.norm(about_root[a + 25 : a + 45] - about_root[a], axis=-1).mean(axis=-1)
+        b = a + 25 + int(np.argmin(gaps))
+        if best is None or gaps.min() < best[0]:
+            best = (float(gaps.min()), a, b)
+    _, a, b = best
+    cut = motion.slice(a, b + 1)
+    n = cut.num_frames - 1
+    weight = (np.arange(n + 1) / n)[:, None]
+    residual = rot.mul(rot.inv(cut.lrot[-1]), cut.lrot[0])  # last * r = first
+    spread = rot.slerp(rot.identity(residual.shape[:-1])[None].repeat(n + 1, 0),
+                       residual[None].repeat(n + 1, 0), weight)  # fmt: skip
+    lrot = rot.mul(cut.lrot, spread)
+    lpos = cut.lpos.copy()
+    lpos[:, 0, 1] += weight[:, 0] * (cut.lpos[0, 0, 1] - cut.lpos[-1, 0, 1])
+    looped = cut.replace(lrot=lrot, lpos=lpos)
+    return renamed(looped, rig_names) if rig_names else looped

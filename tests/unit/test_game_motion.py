@@ -1,0 +1,166 @@
+"""Game invariants at the motion level: loops, leading reference frames, hinges, speed,
+root motion in place; on real files where there are any."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motion import anatomy, bvh, loops, reference, retarget, root_motion
+from motion import canonical as C
+from motion import kinematics as K
+from motion import rotations as R
+from motion.features import time_warp
+from tests import rigs
+from tests.conftest import data_path
+
+H = C.body_height()
+
+
+def canonical(motion, fps=C.FPS):
+    return retarget.to_canonical(motion, retarget.make_rig(motion.skeleton, motion), fps=fps)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return canonical(rigs.walk_cycle())
+
+
+# --- loops ---------------------------------------------------------------------------------
+
+
+def test_a_closed_walk_cycle_is_found_closed_and_without_its_last_frame_open(walk):
+    loop = loops.detect(walk)
+    assert loop is not None and loop.closed and loop.gap < 1e-6
+    open_loop = loops.detect(walk.slice(0, -1))
+    assert open_loop is not None and not open_loop.closed
+    assert 0.5 < open_loop.gap <= loops.OPEN_GAP
+
+
+def test_a_foreign_take_is_no_loop_unless_the_client_says_so():
+    take = canonical(bvh.load(data_path("cmu-31", "02_01.bvh")).slice(1))
+    assert loops.detect(take) is None
+    forced = loops.detect(take, force=True)
+    assert forced is not None and not forced.closed
+
+
+def test_closing_an_open_cycle_adds_the_first_frame_one_cycle_on(walk):
+    opened = walk.slice(0, -1)
+    closed = loops.closed(opened, loops.detect(opened))
+    assert closed.num_frames == walk.num_frames
+    gap = np.linalg.norm(K.global_positions(closed)[-1] - K.global_positions(walk)[-1], axis=-1)
+    assert gap.max() < 0.01 * H
+
+
+def test_a_cycle_extended_and_cropped_is_itself_and_runs_on_smoothly(walk):
+    cycle = loops.Cycle.of(walk, margin=50)
+    extended = cycle.extended(walk)
+    assert extended.num_frames == walk.num_frames + 100
+    local = loops.local_poses(extended)
+    steps = np.linalg.norm(np.diff(local, axis=0), axis=-1).mean(axis=-1)
+    assert steps.max() < 1.5 * np.median(steps)  # no jump where one copy meets the next
+    hips = K.global_positions(extended)[:, C.INDEX["Hips"]]
+    assert np.all(np.diff(hips[:, 2]) > 0)  # the copies walk on, not back to the start
+    back = cycle.cropped(extended)
+    assert np.abs(K.global_positions(back) - K.global_positions(walk)).max() < 1e-9
+
+
+def test_cropping_spreads_what_a_processed_cycle_lost_at_its_ends(walk):
+    cycle = loops.Cycle.of(walk, margin=10)
+    extended = cycle.extended(walk)
+    lrot = extended.lrot.copy()
+    drift = np.linspace(0.0, 0.4, extended.num_frames)  # a bend that grows over the clip
+    knee = C.INDEX["LowerLeg_L"]
+    lrot[:, knee] = R.mul(R.from_rotvec(drift[:, None] * [1.0, 0.0, 0.0]), lrot[:, knee])
+    processed = extended.replace(lrot=lrot)
+    raw = processed.slice(10, 10 + walk.num_frames)
+    jump, step = loops.loop_jump(raw)
+    assert jump > 0.5 * step  # as cut, it pops
+    jump, step = loops.loop_jump(cycle.cropped(processed))
+    assert jump < 1e-9 * H
+
+
+# --- reference frames ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("take", "count"), [("02_01", 1), ("07_12", 2), ("09_01", 1)])
+def test_cmu_t_pose_frames_are_found(take, count):
+    motion = bvh.load(data_path("cmu-31", f"{take}.bvh"))
+    rig = retarget.make_rig(motion.skeleton, motion)
+    full = retarget.to_canonical(motion, rig, fps=None)
+    assert reference.leading_reference_frames(full, reference.rest_on_canonical(rig, 120)) == count
+
+
+@pytest.mark.parametrize(
+    "parts", [("xia", "angry_13_000.bvh"), ("cmu-dance-43", "60_01_scaled.bvh")]
+)
+def test_takes_that_start_in_motion_have_none(parts):
+    motion = bvh.load(data_path(*parts))
+    rig = retarget.make_rig(motion.skeleton, motion)
+    full = retarget.to_canonical(motion, rig, fps=None)
+    assert reference.leading_reference_frames(full, reference.rest_on_canonical(rig, 120)) == 0
+
+
+def test_a_t_pose_put_before_a_walk_is_found():
+    walk = rigs.load_fixture()
+    rest = walk.slice(0, 1).replace(lrot=R.identity((1, walk.skeleton.num_joints)))
+    with_pose = walk.replace(lrot=np.concatenate([rest.lrot, walk.lrot]),
+                             lpos=np.concatenate([walk.lpos[:1], walk.lpos]))  # fmt: skip
+    for motion, count in ((walk, 0), (with_pose, 1)):
+        rig = retarget.make_rig(motion.skeleton, motion)
+        rest = reference.rest_on_canonical(rig, motion.fps)
+        assert reference.leading_reference_frames(canonical(motion, None), rest) == count
+
+
+# --- hinges and speed ----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def bandai():
+    return canonical(bvh.load(data_path("bandai", "dataset-2", "dataset-2_walk_normal_001.bvh")))
+
+
+def test_real_mocap_keeps_its_knees_and_barely_changes_under_the_hinges(bandai):
+    assert not anatomy.knees_backwards(bandai).any()
+    moved = K.global_positions(anatomy.hinged(bandai)) - K.global_positions(bandai)
+    assert np.linalg.norm(moved, axis=-1).max() < 0.005 * H
+
+
+def test_a_knee_bent_the_wrong_way_is_seen_and_straightened(bandai):
+    lrot = bandai.lrot.copy()
+    for name in anatomy.KNEES:
+        j = C.INDEX[name]
+        flexion = 2 * np.arctan2(lrot[:, j, 0], lrot[:, j, 3])  # about the thigh's X
+        lrot[:, j] = R.mul(R.from_rotvec((-2 * flexion)[:, None] * [1.0, 0.0, 0.0]), lrot[:, j])
+    reversed_knees = bandai.replace(lrot=lrot)
+    assert anatomy.knees_backwards(reversed_knees).mean() > 0.5
+    fixed = anatomy.hinged(reversed_knees)
+    assert not anatomy.knees_backwards(fixed).any()
+
+
+def test_the_warp_is_capped_at_real_mocap_speeds(bandai):
+    peak = anatomy.peak_speed(bandai)
+    assert 0.5 < peak < anatomy.SPEED_LIMIT  # a walk: about a body height a second
+    assert anatomy.capped_warp(1.2, bandai) == 1.2
+    capped = anatomy.capped_warp(100.0, bandai)
+    assert capped == pytest.approx(anatomy.SPEED_LIMIT / peak)
+    warped = time_warp(bandai, capped)
+    assert anatomy.peak_speed(warped) == pytest.approx(anatomy.SPEED_LIMIT, rel=0.05)
+    assert anatomy.capped_warp(0.7, bandai) == 0.7  # slowing down is never capped
+
+
+# --- root motion ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("upright", [True, False], ids=["y-up", "z-up"])
+def test_in_place_removes_travel_and_keeps_bob_and_facing(upright):
+    motion = rigs.load_fixture() if upright else rigs.z_up(rigs.load_fixture())
+    rig = retarget.make_rig(motion.skeleton, motion)
+    hips = rig.mapping["Hips"]
+    still = root_motion.in_place(motion, hips, rig.up)
+    before = R.apply(rig.up, K.global_positions(motion)[:, hips])
+    after = R.apply(rig.up, K.global_positions(still)[:, hips])
+    assert np.ptp(before[:, [0, 2]], axis=0).max() > 0.5 * rig.height  # it walked
+    assert np.ptp(after[:, [0, 2]], axis=0).max() < 1e-9 * rig.height
+    assert np.allclose(after[:, 1], before[:, 1])
+    assert np.allclose(still.lrot, motion.lrot)
