@@ -47,7 +47,7 @@ def rest_on_canonical(rig: retarget.Rig, fps: float) -> Motion:
     """The rest pose of ``rig``'s skeleton (every rotation zero), one frame on the
     canonical skeleton."""
     sk = rig.skeleton
-    rest = Motion(sk, fps, R.identity((1, sk.num_joints)), sk.offsets[None].copy())
+    rest = Motion(sk, fps, R.identity((1, sk.num_joints)), rig.bone_vectors[None].copy())
     return retarget.to_canonical(rest, rig, fps=None)
 
 

@@ -148,6 +148,13 @@ class Rig:
     confidence: float = 1.0
     convention: str = ""  # the naming convention the names matched
     corrections: tuple[_Correction, ...] = ()
+    bones: np.ndarray | None = None  # (J, 3) the clip's own translations where they differ
+
+    @property
+    def bone_vectors(self) -> np.ndarray:
+        """Each joint's translation from its parent as the clip holds it: its position
+        channels' median where it has animated ones, else its offset (:func:`bone_vectors`)."""
+        return self.skeleton.offsets if self.bones is None else self.bones
 
     @property
     def up_axis(self) -> str:
@@ -201,7 +208,8 @@ def make_rig(
     found = rig_mapping.find_mapping(skeleton, motion, mapping, frames=frames)
     m = found.joints
     nj = skeleton.num_joints
-    rest = skeleton.rest_positions()
+    bones, moving = bone_vectors(skeleton, motion, m["Hips"])
+    rest = skeleton.with_offsets(bones).rest_positions()
     height = float(max(np.ptp(rest, axis=0).max(), 1e-6))
     how = "given"
     if reference_lrot is None:
@@ -223,12 +231,12 @@ def make_rig(
         if len(between):
             reference_lrot = reference_lrot.copy()
             reference_lrot[between] = rot.mean(motion.lrot[sampled][:, between])
-    grot, gpos = K.fk(reference_lrot, skeleton.offsets, skeleton.parents)
+    grot, gpos = K.fk(reference_lrot, bones, skeleton.parents)
     tpose = _tpose(skeleton, m, grot, gpos, height)
     leg = 0.0
     for s in ("L", "R"):
         path = _chain(skeleton.parents, m[f"UpperLeg_{s}"], m[f"Foot_{s}"])
-        leg += sum(np.linalg.norm(skeleton.offsets[k]) for k in path) / 2.0
+        leg += sum(np.linalg.norm(bones[k]) for k in path) / 2.0
     return Rig(
         skeleton,
         m,
@@ -240,8 +248,39 @@ def make_rig(
         found.method,
         found.confidence,
         found.convention,
-        _corrections(skeleton, m, grot, gpos, height),
+        _corrections(skeleton, m, grot, gpos, height, moving),
+        None if bones is skeleton.offsets else bones,
     )
+
+
+def bone_vectors(
+    skeleton: Skeleton, motion: Motion | None, hips: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's translation from its parent as ``motion`` holds it ``(J, 3)``, and
+    which joints' translations move ``(J,)``. A joint with position channels (Brekel's
+    exporter writes them on every joint, Blender's on many) may hold other values than its
+    OFFSET, and move them: its median over the clip stands for its offset then (the
+    ``hips`` and the joints above them keep theirs: their translations are the path).
+    Without such joints: the offsets, as is."""
+    offsets = skeleton.offsets
+    moving = np.zeros(skeleton.num_joints, dtype=bool)
+    if motion is None or motion.num_frames == 0:
+        return offsets, moving
+    path = set(_chain(skeleton.parents, -1, hips))
+    inner = np.array(
+        [j not in path and skeleton.has_position(j) for j in range(skeleton.num_joints)]
+    )
+    if not inner.any():
+        return offsets, moving
+    lpos = motion.lpos[:, inner]
+    tiny = 1e-6 * skeleton.height()
+    moving[inner] = np.ptp(lpos, axis=0).max(axis=-1) > tiny
+    median = np.median(lpos, axis=0)
+    if not moving.any() and np.abs(median - offsets[inner]).max() <= tiny:
+        return offsets, moving
+    bones = offsets.copy()
+    bones[inner] = median
+    return bones, moving
 
 
 def _tpose(
@@ -312,10 +351,17 @@ def _mapped_children(cname: str, m: dict[str, int]) -> list[str]:
 
 
 def _corrections(
-    skeleton: Skeleton, m: dict[str, int], grot: np.ndarray, gpos: np.ndarray, height: float
+    skeleton: Skeleton,
+    m: dict[str, int],
+    grot: np.ndarray,
+    gpos: np.ndarray,
+    height: float,
+    moving: np.ndarray | None = None,
 ) -> tuple[_Correction, ...]:
-    """A correction for each mapped joint with a mapped child below joints that can move."""
+    """A correction for each mapped joint with a mapped child below joints that can move,
+    or on the end of translations that move (``moving``, :func:`bone_vectors`)."""
     movable = np.array([len(ch) > 0 for ch in skeleton.channels])
+    moving = np.zeros(skeleton.num_joints, dtype=bool) if moving is None else moving
     tiny = 1e-6 * height
     out = []
     for cname, j in m.items():
@@ -323,7 +369,8 @@ def _corrections(
             continue
         children = [m[c] for c in _mapped_children(cname, m)]
         paths = [tuple(_chain(skeleton.parents, j, k)) for k in children]  # child first
-        if not any(movable[list(p[1:])].any() for p in paths if len(p) > 1):
+        turning = any(movable[list(p[1:])].any() for p in paths if len(p) > 1)
+        if not turning and not any(moving[list(p)].any() for p in paths):
             continue
         ref = rot.apply(rot.inv(grot[j]), gpos[children] - gpos[j])
         lengths = np.linalg.norm(ref, axis=-1)
@@ -477,7 +524,7 @@ def from_canonical(canon: Motion, rig: Rig, like: Motion | None = None) -> Motio
         own_lrot, own_lpos = like.lrot.copy(), like.lpos.copy()
     else:
         own_lrot = np.repeat(rig.reference_lrot[None], frames, axis=0)
-        own_lpos = np.repeat(sk.offsets[None], frames, axis=0)
+        own_lpos = np.repeat(rig.bone_vectors[None], frames, axis=0)
         own_lpos[:, 0] = 0.0
     mapped, _ = _canonical_sources(rig)
     joints = np.array([rig.mapping[C.JOINTS[ci]] for ci in mapped])

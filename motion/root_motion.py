@@ -32,4 +32,3 @@ def in_place(motion: Motion, hips: int, up: np.ndarray | None = None) -> Motion:
     roots = np.nonzero(motion.skeleton.parents < 0)[0]
     lpos[:, roots] -= world[:, None]
     return motion.replace(lpos=lpos)
-

@@ -164,6 +164,28 @@ def with_channels(motion: Motion, order: str = "XYZ", positions_everywhere: bool
     return motion.replace(skeleton=new_sk)
 
 
+def with_animated_translations(motion: Motion, seed: int = 0) -> Motion:
+    """Position channels on every joint whose values are not the OFFSETs, as markerless
+    capture exporters (Brekel's) write them: each bone's vector in its parent's frame is
+    the offset turned by up to 0.15 radians and its length off by up to 6% (the solver's
+    skeleton against the file's template), and it keeps moving by 0.02 radians and 1% of
+    its length (about 1 Hz, each bone its own phase). Rotations are ``motion``'s."""
+    rng = np.random.default_rng(seed)
+    sk = motion.skeleton
+    joints = sk.num_joints
+    t = np.arange(motion.num_frames)[:, None] / motion.fps
+    phase = rng.uniform(0, 2 * np.pi, size=(3, joints))
+    rate = rng.uniform(0.6, 1.4, size=(3, joints))
+    wave = np.sin(2 * np.pi * rate[:, None] * t[None] + phase[:, None])  # (3, F, J)
+    turn = rng.uniform(-0.15, 0.15, size=(joints, 3)) * [1.0, 1.0, 0.0]
+    stretch = rng.uniform(0.94, 1.06, size=joints)
+    moving = 0.02 * np.stack([wave[0], wave[1], np.zeros_like(wave[0])], -1)
+    swing = rot.mul(rot.from_rotvec(moving), rot.from_rotvec(turn)[None])
+    lpos = rot.apply(swing, sk.offsets[None]) * (stretch * (1.0 + 0.01 * wave[2]))[..., None]
+    lpos[:, 0] = motion.lpos[:, 0]
+    return with_channels(motion, positions_everywhere=True).replace(lpos=lpos)
+
+
 def scaled(motion: Motion, factor: float) -> Motion:
     sk = motion.skeleton
     new_sk = Skeleton(
@@ -499,6 +521,13 @@ def layout_variants(name: str, motion: Motion) -> dict[str, CorpusRig]:
         add("a_pose_numbers", apose, _name_origin(apose, motion))
     frames = renamed_numbers(random_frames(motion, 9), 10)
     add("rotated_frames_numbers", frames, _name_origin(frames, motion))
+    # a performance of its own (its translations move the joints): its source is itself
+    # under the source's names
+    animated = with_animated_translations(motion)
+    animated_numbers = renamed_numbers(animated, 14)
+    out[f"{name}/animated_translations_numbers"] = CorpusRig(
+        animated_numbers, animated, _name_origin(animated_numbers, animated), "structure"
+    )
     everything = scaled(
         z_up(shuffled_children(renamed_words(with_helpers(motion, 11), 12), 13)), 0.01
     )
