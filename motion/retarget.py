@@ -35,14 +35,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from motion import canonical as C
-from motion import kernels, rig_mapping
+from motion import kernels, rig_mapping, rig_tree
 from motion import kinematics as K
 from motion import rotations as rot
-from motion.rig_mapping import REQUIRED
 from motion.skeleton import Motion, Skeleton
 
 __all__ = [
-    "REQUIRED", "Rig", "body_frame", "from_canonical", "make_rig", "retarget", "to_canonical",
+    "Rig", "body_frame", "from_canonical", "make_rig", "retarget", "to_canonical",
 ]  # fmt: skip
 
 _CANONICAL_REST = C.SKELETON.rest_positions()
@@ -203,7 +202,7 @@ def make_rig(
     """
     frames, sampled = None, np.zeros(0, dtype=int)
     if motion is not None and motion.num_frames:
-        sampled = rig_mapping.sample_indices(motion.num_frames)
+        sampled = rig_tree.sample_indices(motion.num_frames)
         frames = K.fk(motion.lrot[sampled], motion.lpos[sampled], skeleton.parents)
     found = rig_mapping.find_mapping(skeleton, motion, mapping, frames=frames)
     m = found.joints

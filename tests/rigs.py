@@ -27,7 +27,7 @@ import numpy as np
 from motion import bvh, retarget
 from motion import kinematics as K
 from motion import rotations as rot
-from motion.rig_mapping import normalise_name
+from motion.rig_names import normalise_name
 from motion.skeleton import Motion, Skeleton
 
 FIXTURE = Path(__file__).parent / "data" / "cmu_02_01_walk_30fps.bvh"
@@ -277,14 +277,14 @@ _SYLLABLES = [c + v for c in "bdfgkmnpstvz" for v in "aeiou"]
 
 def random_words(count: int, seed: int = 0) -> tuple[str, ...]:
     """``count`` distinct made-up words that name no body part, side or helper."""
-    from motion.rig_mapping import _word_roles
+    from motion.rig_names import word_roles
 
     rng = np.random.default_rng(seed)
     out: list[str] = []
     while len(out) < count:
         word = "".join(rng.choice(_SYLLABLES, size=int(rng.integers(2, 4))))
         word = word.capitalize() if rng.random() < 0.5 else word
-        side, roles, helper = _word_roles((word,))[0]
+        side, roles, helper = word_roles((word,))[0]
         if word not in out and not (side or roles or helper or normalise_name(word)[0]):
             out.append(word)
     return tuple(out)

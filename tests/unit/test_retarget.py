@@ -11,6 +11,7 @@ from motion import kinematics as K
 from motion import retarget as RT
 from motion import rotations as rot
 from motion.errors import MotionError
+from motion.rig_mapping import REQUIRED
 from tests import rigs
 from tests.conftest import data_path
 
@@ -91,7 +92,7 @@ def test_exporter_variants_give_the_same_canonical_motion():
     height = 175.0
     for name, m in rigs.variants(base).items():
         rig = RT.make_rig(m.skeleton, m)
-        assert set(RT.REQUIRED) <= set(rig.mapping), name
+        assert set(REQUIRED) <= set(rig.mapping), name
         got = canonical_pose(m)
         err = np.linalg.norm(got - ref, axis=-1)
         assert err.max() / height < 0.02, (name, rig.reference, err.max())
@@ -171,7 +172,7 @@ def test_non_humanoid_lists_what_it_could_not_find():
     with pytest.raises(MotionError) as err:
         RT.make_rig(snake)
     assert err.value.kind == "unusable"
-    assert set(err.value.unmapped) == set(RT.REQUIRED)
+    assert set(err.value.unmapped) == set(REQUIRED)
     assert "by structure" in str(err.value) and "mapping" in str(err.value)
 
 

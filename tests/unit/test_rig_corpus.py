@@ -13,6 +13,7 @@ from motion import bvh
 from motion import canonical as C
 from motion import kinematics as K
 from motion import retarget as RT
+from motion.rig_mapping import REQUIRED
 from tests import rigs
 from tests.conftest import DATA_DIR
 
@@ -77,7 +78,7 @@ def test_corpus_rigs_map_the_joints_their_sources_map(mapped):
     wrong = []
     for m in mapped:
         got, want = m.rig.mapping_by_name(), m.source_rig.mapping_by_name()
-        for joint in RT.REQUIRED:
+        for joint in REQUIRED:
             origin = m.corpus.origin.get(got[joint])
             if origin is not None and origin != want[joint]:
                 wrong.append((m.name, joint, got[joint], origin, want[joint]))
@@ -89,7 +90,7 @@ def test_mapping_reports_how_and_how_sure(mapped):
         report = m.rig.report()
         assert report["method"] in ("names", "structure")
         assert 0.0 < report["confidence"] <= 1.0, (m.name, report["confidence"])
-        assert set(RT.REQUIRED) <= set(report["mapping"])
+        assert set(REQUIRED) <= set(report["mapping"])
         if m.rig.method == "names":
             assert report["convention"]
 

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from motion import bvh
+from motion import bvh, rig_names
 from motion import retarget as RT
 from motion import rig_mapping as RM
 from motion import rotations as rot
@@ -74,18 +74,18 @@ def test_a_convention_is_found_behind_any_common_prefix():
     names = tuple(f"Actor7:{n}" for n in ("Hip", "Ab", "Chest", "Neck", "Head", "LThigh",
                   "LShin", "LFoot", "RThigh", "RShin", "RFoot", "LShoulder", "LUArm", "LFArm",
                   "LHand", "RShoulder", "RUArm", "RFArm", "RHand"))  # fmt: skip
-    convention, found = RM.match_convention(names)
+    convention, found = rig_names.match_convention(names)
     assert convention == "OptiTrack Motive"
     assert names[found["UpperArm_R"]] == "Actor7:RUArm" and names[found["Hips"]] == "Actor7:Hip"
 
 
 def test_names_are_normalised_for_decorations_and_sides():
-    assert RM.normalise_name("l_upleg_JNT") == ("L", "upleg")
-    assert RM.normalise_name("CC_Base_R_Forearm") == ("R", "forearm")
-    assert RM.normalise_name("mixamorig:LeftHand") == ("L", "hand")
-    assert RM.normalise_name("thigh.R") == ("R", "thigh")
-    assert RM.is_helper("CC_Base_L_UpperarmTwist01") and RM.is_helper("weapon_r")
-    assert not RM.is_helper("l_forearm_JNT")
+    assert rig_names.normalise_name("l_upleg_JNT") == ("L", "upleg")
+    assert rig_names.normalise_name("CC_Base_R_Forearm") == ("R", "forearm")
+    assert rig_names.normalise_name("mixamorig:LeftHand") == ("L", "hand")
+    assert rig_names.normalise_name("thigh.R") == ("R", "thigh")
+    assert rig_names.is_helper("CC_Base_L_UpperarmTwist01") and rig_names.is_helper("weapon_r")
+    assert not rig_names.is_helper("l_forearm_JNT")
 
 
 def featureless(motion: Motion) -> Motion:
