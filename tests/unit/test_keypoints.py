@@ -12,12 +12,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from motion import keypoints
+from motion import canonical as C
+from motion import keypoint_layouts, keypoints
 from motion.errors import MotionError
-from motion.keypoints import CANONICAL_JOINTS, Keypoints2D
+from motion.keypoints import Keypoints2D
 from tests.conftest import data_path
 
-J = {name: i for i, name in enumerate(CANONICAL_JOINTS)}
+J = C.INDEX
 FOLDERS = ("openpose-treadmill-27", "openpose-treadmill-32", "openpose-treadmill-95")
 VIDEO_FPS = 24000 / 1001
 
@@ -220,11 +221,11 @@ def check_figure(kp: Keypoints2D, at=(300.0, 300.0), scale=1.0, height=0.0) -> N
     hip_joints, shoulders = expect("l_hip", "r_hip"), expect("l_shoulder", "r_shoulder")
     torso = shoulders - hip_joints
     centres = {  # the canonical joints sit above the detector's hip joints and shoulders
-        "Hips": hip_joints + keypoints.HIPS_ABOVE_HIP_JOINTS * torso,
-        "Neck": shoulders + keypoints.NECK_ABOVE_SHOULDERS * torso,
+        "Hips": hip_joints + keypoint_layouts.HIPS_ABOVE_HIP_JOINTS * torso,
+        "Neck": shoulders + keypoint_layouts.NECK_ABOVE_SHOULDERS * torso,
     }
     head = expect("l_ear", "r_ear") - shoulders
-    centres["Head"] = centres["Neck"] + keypoints.HEAD_FROM_NECK * np.linalg.norm(
+    centres["Head"] = centres["Neck"] + keypoint_layouts.HEAD_FROM_NECK * np.linalg.norm(
         torso
     ) * head / np.linalg.norm(head)
     for joint, xy in centres.items():
@@ -507,21 +508,19 @@ def test_fuzzed_bytes_only_ever_raise_motion_error(blob: bytes) -> None:
 
 
 def test_joint_centre_offsets_are_the_canonical_skeletons():
-    from motion import canonical as C
-
     rest = C.SKELETON.rest_positions()
     y = {name: rest[C.INDEX[name], 1] for name in C.JOINTS}
     hip_joints = 0.5 * (y["UpperLeg_L"] + y["UpperLeg_R"])
     shoulders = 0.5 * (y["UpperArm_L"] + y["UpperArm_R"])
     torso = shoulders - hip_joints
     head = np.linalg.norm(rest[C.INDEX["Head"]] - rest[C.INDEX["Neck"]])
-    assert keypoints.HIPS_ABOVE_HIP_JOINTS == pytest.approx(
+    assert keypoint_layouts.HIPS_ABOVE_HIP_JOINTS == pytest.approx(
         (y["Hips"] - hip_joints) / torso, abs=1e-3
     )
-    assert keypoints.NECK_ABOVE_SHOULDERS == pytest.approx(
+    assert keypoint_layouts.NECK_ABOVE_SHOULDERS == pytest.approx(
         (y["Neck"] - shoulders) / torso, abs=1e-3
     )
-    assert keypoints.HEAD_FROM_NECK == pytest.approx(head / torso, abs=1e-3)
+    assert keypoint_layouts.HEAD_FROM_NECK == pytest.approx(head / torso, abs=1e-3)
 
 
 def test_a_zip_entry_without_a_name_is_skipped() -> None:
