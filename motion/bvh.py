@@ -9,7 +9,7 @@ Writing keeps names, offsets, End Sites, channel layout and frame time, so
 ``loads(dumps(m))`` reproduces ``m`` to print precision. Malformed input
 raises :class:`~motion.errors.MotionError` naming the line and the problem.
 The numbers of the motion block are read and written by compiled loops
-(``motion.kernels``), the service's hottest text code.
+(``motion.bvh_kernels``), the service's hottest text code.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from motion import kernels, rotations
+from motion import bvh_kernels, kernels, rotations
 from motion.errors import MotionError
 from motion.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Motion, Skeleton
 
@@ -292,18 +292,18 @@ def _parse_motion(raw: bytes, pos: int, line: int, skeleton: Skeleton) -> tuple[
 def _read_block(block: bytes, channels: int, first_line: int) -> np.ndarray:
     """The motion block ``block`` (bytes after the ``Frame Time`` line, whose first line is
     ``first_line``) as an array ``(F, channels)``: every non-blank line one frame of
-    ``channels`` finite numbers, each read as ``float()`` reads it (``kernels.read_numbers``,
+    ``channels`` finite numbers, each read as ``float()`` reads it (``bvh_kernels.read_numbers``,
     and ``float()`` itself for the few tokens it leaves). Any other block raises
     :class:`MotionError` naming the line and the problem."""
     data = np.frombuffer(block, dtype=np.uint8)
-    values, slow, status, line = kernels.read_numbers(data, channels)
-    if status == kernels.READ_COUNT:
+    values, slow, status, line = bvh_kernels.read_numbers(data, channels)
+    if status == bvh_kernels.READ_COUNT:
         count = len(block.split(b"\n")[line].split())
         raise MotionError(
             f"line {first_line + line}: frame has {count} values, the hierarchy needs {channels}",
             line=first_line + line,
         )
-    if status == kernels.READ_SLOW:  # many odd tokens: numpy's C reader, then float()
+    if status == bvh_kernels.READ_SLOW:  # many odd tokens: numpy's C reader, then float()
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # a non-number makes fromstring warn and stop early
             try:
@@ -352,7 +352,7 @@ def _line_of_row(block: bytes, row: int) -> int:
 
 def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
     """Channel values ``(F, C)`` -> a motion: position channels replace offsets, rotation
-    channels become quaternions (``kernels.channels_to_motion``)."""
+    channels become quaternions (``bvh_kernels.channels_to_motion``)."""
     joints = skeleton.num_joints
     position_column = np.full((joints, 3), -1, dtype=np.int64)
     angle_column = np.full((joints, 3), -1, dtype=np.int64)
@@ -369,7 +369,9 @@ def _to_motion(skeleton: Skeleton, fps: float, values: np.ndarray) -> Motion:
             col += 1
     values = np.ascontiguousarray(values, dtype=np.float64)
     offsets = np.ascontiguousarray(skeleton.offsets, dtype=np.float64)
-    lrot, lpos = kernels.channels_to_motion(values, offsets, position_column, angle_column, axes)
+    lrot, lpos = bvh_kernels.channels_to_motion(
+        values, offsets, position_column, angle_column, axes
+    )
     return Motion(skeleton, fps, lrot, lpos)
 
 
@@ -432,14 +434,14 @@ _FIXED_LIMIT = 1e12  # beyond this (never motion) the text goes through printf
 
 def format_fixed(values: np.ndarray) -> str:
     """Rows of ``values (F, C)`` as text, ``%.6f`` numbers separated by spaces, one row a
-    line (``kernels.format_fixed``). The same text as ``np.savetxt(fmt="%.6f")`` but for
+    line (``bvh_kernels.format_fixed``). The same text as ``np.savetxt(fmt="%.6f")`` but for
     ties at the seventh decimal and ``-0.000000``, written ``0.000000``."""
     values = np.ascontiguousarray(values, dtype=np.float64)
     if not np.isfinite(values).all() or np.abs(values).max(initial=0.0) >= _FIXED_LIMIT:
         buf = io.StringIO()
         np.savetxt(buf, values, fmt="%.6f", delimiter=" ")
         return buf.getvalue()
-    return kernels.format_fixed(values).tobytes().decode("ascii")
+    return bvh_kernels.format_fixed(values).tobytes().decode("ascii")
 
 
 def save(motion: Motion, path: str | os.PathLike) -> None:

@@ -18,7 +18,7 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from motion import canonical as C
 from motion import contacts as CT
-from motion import kernels
+from motion import ik_kernels
 from motion import kinematics as K
 from motion import rotations as rot
 from motion.errors import MotionError
@@ -95,7 +95,9 @@ def two_bone_ik(
     )
     shape = arrays[0].shape[:-1]
     flat = [np.ascontiguousarray(x.reshape(-1, 3)) for x in arrays]
-    hip_turn, knee_turn, knee_new, ankle_new = kernels.two_bone_ik(*flat, hinted, eps, POLE_WEIGHT)
+    hip_turn, knee_turn, knee_new, ankle_new = ik_kernels.two_bone_ik(
+        *flat, hinted, eps, POLE_WEIGHT
+    )
     return LegSolution(
         hip_turn.reshape(shape + (4,)),
         knee_turn.reshape(shape + (4,)),
@@ -145,7 +147,7 @@ def _pin_offsets(
     """
     if toe is None or toe_contact is None:
         toe, toe_contact = ankle, np.zeros(len(ankle), dtype=bool)
-    return kernels.pin_offsets(
+    return ik_kernels.pin_offsets(
         np.ascontiguousarray(ankle, dtype=np.float64),
         np.ascontiguousarray(toe, dtype=np.float64),
         np.ascontiguousarray(ankle_contact, dtype=bool),
@@ -234,13 +236,13 @@ def _knee_poles(grot_hip, hip, knee, ankle, toe, frames) -> np.ndarray:
     grot_hip, hip, knee, ankle = (np.ascontiguousarray(x, dtype=np.float64)
                                   for x in (grot_hip, hip, knee, ankle))  # fmt: skip
     frames = np.asarray(frames, dtype=np.int64)
-    hinge_local, thigh, shin = kernels.knee_hinge(grot_hip, hip, knee, ankle)
+    hinge_local, thigh, shin = ik_kernels.knee_hinge(grot_hip, hip, knee, ankle)
     if np.linalg.norm(hinge_local) > 1e-3 * (thigh * shin) * len(hip):
         hinge = hinge_local / np.linalg.norm(hinge_local)
-        return kernels.knee_poles(grot_hip, hip, ankle, ankle, frames, hinge, 0)
+        return ik_kernels.knee_poles(grot_hip, hip, ankle, ankle, frames, hinge, 0)
     if toe is not None:
         toe = np.ascontiguousarray(toe, dtype=np.float64)
-        return kernels.knee_poles(grot_hip, hip, ankle, toe, frames, np.zeros(3), 1)
+        return ik_kernels.knee_poles(grot_hip, hip, ankle, toe, frames, np.zeros(3), 1)
     return np.zeros((len(frames), 3))
 
 
@@ -379,7 +381,7 @@ def _turn_leg(
     """``lrot``'s leg joints at frames ``f`` turned by an IK solution (world-frame turns
     of the thigh and, after it, the shin); the ankle keeps its global rotation."""
     hip, knee, ankle, _ = leg
-    kernels.turn_leg(
+    ik_kernels.turn_leg(
         lrot,
         np.ascontiguousarray(grot),
         np.asarray(parents, dtype=np.int64),
@@ -570,7 +572,7 @@ def lift_toes(
         f = np.nonzero(lift > 1e-6)[0]
         if not len(f):
             continue
-        kernels.lift_toes(
+        ik_kernels.lift_toes(
             lrot, grot, gpos, f.astype(np.int64), lift, int(parents[ankle]), ankle, toe
         )
     return motion.replace(lrot=lrot)

@@ -75,9 +75,9 @@ def main(argv: list[str] | None = None) -> None:
     if settings.workers > 1:
         # compiled once here: workers compiling at once into one numba cache can leave
         # it inconsistent, and a worker that then loads it crashes
-        from motion import kernels
+        from motion import compiled
 
-        kernels.warm()
+        compiled.warm()
 
     import uvicorn
 

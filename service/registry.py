@@ -14,7 +14,7 @@ import threading
 from collections.abc import Mapping
 from typing import Any, Literal
 
-from motion import kernels
+from motion import compiled
 from service import metrics
 from service.config import Settings
 from service.engines import ENGINE_FACTORIES, Engine, EngineFactory, GenericEngine
@@ -83,7 +83,7 @@ class ModelRegistry:
             )
 
     def _load(self) -> None:
-        kernels.warm()  # the motion core's compiled loops, before the first request needs them
+        compiled.warm()  # the motion core's compiled loops, before the first request needs them
         try:
             manifest = load_manifest(self.models_dir)
         except ManifestError as exc:

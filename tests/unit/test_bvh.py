@@ -8,7 +8,7 @@ import tarfile
 import numpy as np
 import pytest
 
-from motion import bvh, kernels
+from motion import bvh, bvh_kernels
 from motion import rotations as rot
 from motion.errors import MotionError
 from tests import rigs
@@ -297,9 +297,9 @@ def test_block_reader_equals_float_of_each_token():
 
 
 def test_block_reader_with_many_odd_tokens_equals_float():
-    """Past kernels.MAX_SLOW tokens it leaves to float(), numpy's reader reads the block."""
+    """Past bvh_kernels.MAX_SLOW tokens it leaves to float(), numpy's reader reads the block."""
     rng = np.random.default_rng(7)
-    values = rng.standard_normal((kernels.MAX_SLOW // 3 + 10, 3))
+    values = rng.standard_normal((bvh_kernels.MAX_SLOW // 3 + 10, 3))
     block = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in values).encode()
     got = bvh._read_block(block, 3, first_line=1)
     assert got.tobytes() == values.tobytes()

@@ -1,4 +1,5 @@
-"""The compiled loops of motion/kernels.py against the numpy arithmetic they replaced."""
+"""The compiled loops of motion/kernels.py, bvh_kernels.py and ik_kernels.py against the
+numpy arithmetic they replaced."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from motion import ik, kernels
+from motion import ik, ik_kernels, kernels
 from motion import rotations as rot
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -18,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 127, 128, 129, 130, 257, 1000, 5003])
 def test_pairwise_sum_adds_as_numpy_does(n):
     values = np.random.default_rng(n).normal(size=n) * 123.4
-    assert kernels._pairwise_sum(values, 0, n) == np.sum(values)  # bit for bit
+    assert ik_kernels._pairwise_sum(values, 0, n) == np.sum(values)  # bit for bit
 
 
 def test_long_contacts_run_in_a_process_that_loads_the_kernels_from_the_cache():
