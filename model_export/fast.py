@@ -167,7 +167,29 @@ def main(argv: list[str] | None = None) -> dict:
         help="sigma set, not measured: for styles without held-out takes to measure it on",
     )
     args = p.parse_args(argv)
-    ckpt_dir, models_dir = Path(args.checkpoint_dir), Path(args.models_dir)
+    return export(
+        Path(args.checkpoint_dir),
+        Path(args.models_dir),
+        only=args.styles,
+        smoothing=args.output_smoothing,
+    )
+
+
+def export(
+    ckpt_dir: Path,
+    models_dir: Path,
+    name: str = MODEL_NAME,
+    training_data: list[str] = TRAINING_DATA,
+    licence: str = LICENCE,
+    only: list[str] | None = None,
+    smoothing: float | None = None,
+    extra: dict | None = None,
+    strengths: dict[str, float] = STYLE_STRENGTHS,
+) -> dict:
+    """The networks of ``ckpt_dir`` in ``models_dir`` as the manifest entry ``name``
+    (module docstring): ``only`` these styles (default every checkpoint); the output
+    smoothing ``smoothing``, measured when ``None``; ``extra`` joins the entry's;
+    ``strengths``: styles played at a strength of their own (chosen for Bandai's)."""
     out = models_dir / FOLDER
     if out.exists():
         shutil.rmtree(out)
@@ -175,16 +197,16 @@ def main(argv: list[str] | None = None) -> dict:
 
     teacher = translator_entry(models_dir)
     shutil.copyfile(models_dir / teacher.extra["stats"], out / "stats.npz")
-    speeds = {name: info["speed"] for name, info in teacher.extra["styles"].items()}
+    speeds = {style: info["speed"] for style, info in teacher.extra["styles"].items()}
     files = [f"{FOLDER}/stats.npz"]
     graphs, styles, parity_max = {}, {}, {}
     for path in sorted(ckpt_dir.glob("style_*.pt")):
-        name = path.stem.removeprefix("style_")
-        if args.styles and name not in args.styles:
+        style = path.stem.removeprefix("style_")
+        if only and style not in only:
             continue
         net, ckpt = load_style(path)
         hidden = ckpt["config"]["hidden"]
-        graph = f"style_{name}"
+        graph = f"style_{style}"
         file = f"{FOLDER}/{graph}.onnx"
         export_graph(net, models_dir / file)
         parity_max[graph] = parity(halved(net), models_dir / file)
@@ -196,26 +218,26 @@ def main(argv: list[str] | None = None) -> dict:
             [(OUTPUT, ["batch", Fe.OUTPUT_CHANNELS, "time"])],
         )
         result = ckpt["result"]
-        styles[name] = {
+        styles[style] = {
             "graph": graph,
-            "clips": teacher.extra["styles"][name]["clips"],
-            "speed": speeds[name],
+            "clips": teacher.extra["styles"][style]["clips"],
+            "speed": speeds[style],
             "steps": result["steps"],
             "train_l1": result["train_l1"],
             "trained_at": result.get("trained_at"),
         }
-        if name in STYLE_STRENGTHS:
-            styles[name]["strength"] = STYLE_STRENGTHS[name]
+        if style in strengths:
+            styles[style]["strength"] = strengths[style]
         print(f"exported {graph}: parity max abs {parity_max[graph]:.2e}", flush=True)
 
     entry = {
-        "name": MODEL_NAME,
+        "name": name,
         "family": "fast",
-        "version": MF.dated_version(MODEL_NAME, models_dir),
+        "version": MF.dated_version(name, models_dir),
         "files": files,
         "graphs": graphs,
-        "training_data": TRAINING_DATA,
-        "licence": LICENCE,
+        "training_data": list(training_data),
+        "licence": licence,
         "trained_at": max(s["trained_at"] or "" for s in styles.values()),
         "metrics": {
             "parity_max_abs": parity_max,
@@ -239,15 +261,14 @@ def main(argv: list[str] | None = None) -> dict:
             "styles": styles,
             # measured below unless set by hand
             "output_smoothing": (
-                max(output_smoothing.CANDIDATES)
-                if args.output_smoothing is None
-                else args.output_smoothing
+                max(output_smoothing.CANDIDATES) if smoothing is None else smoothing
             ),
-        },
+        }
+        | (extra or {}),
     }
     MF.put_entry(entry, models_dir)
-    print(f"manifest: {MODEL_NAME} with {len(styles)} styles, {len(files)} files", flush=True)
-    if args.output_smoothing is None:
+    print(f"manifest: {name} with {len(styles)} styles, {len(files)} files", flush=True)
+    if smoothing is None:
         sigma = output_smoothing.choose("fast", models_dir, exporting=True)
         entry["extra"]["output_smoothing"] = sigma
     return entry

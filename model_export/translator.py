@@ -236,7 +236,7 @@ def style_table(net: Translator, stats: Fe.FeatureStats, clips: list, styles: li
     velocity: dict[str, list[float]] = {s: [] for s in styles}
     by_action: dict[tuple[str, str], list[float]] = {}
     for clip in clips:
-        style = canonical_style(clip.style)
+        style = clip.style if clip.style in codes else canonical_style(clip.style)
         enc = Fe.encode(clip.motion)
         codes[style].append(clip_code(net.style3d, enc.style3d, stats))
         velocity[style].append(Fe.encoded_velocity_factor(enc))
@@ -288,10 +288,27 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
+    return export(args.checkpoint, Path(args.models_dir), D.load_bandai())
 
-    net, stats, payload = load_checkpoint(args.checkpoint)
+
+def export(
+    checkpoint: Path,
+    models_dir: Path,
+    clips: list,
+    name: str = MODEL_NAME,
+    training_data: list[str] = TRAINING_DATA,
+    licence: str = LICENCE,
+    extra: dict | None = None,
+    measure_smoothing: bool = True,
+    gains: dict[str, float] = NAMED_STYLE_GAINS,
+) -> dict:
+    """The translator of ``checkpoint`` in ``models_dir`` (module docstring) as the manifest
+    entry ``name``, its style table from ``clips`` (the library it trained on); ``extra``
+    joins the entry's. Without ``measure_smoothing`` the output smoothing is the largest
+    candidate (it is measured on Bandai's held-out takes). ``gains``: named styles taken
+    further than :data:`NAMED_STYLE_GAIN` (chosen for Bandai's)."""
+    net, stats, payload = load_checkpoint(checkpoint)
     step = int(payload["step"])
-    models_dir = Path(args.models_dir)
     out = models_dir / FOLDER
     if out.exists():
         shutil.rmtree(out)
@@ -303,7 +320,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{graph}: parity max abs {fig['max_abs']:.2e}, max rel {fig['max_rel']:.2e}")
 
     Fe.save_stats(out / "stats.npz", stats)
-    table = style_table(net, stats, D.load_bandai(), payload["styles"])
+    table = style_table(net, stats, clips, payload["styles"])
     print(f"a take's own code is nearest its style's: {float(table['nearest_top1']):.1%}")
     np.savez(out / "styles.npz", **{k: np.asarray(v) for k, v in table.items()})
 
@@ -315,7 +332,7 @@ def main(argv: list[str] | None = None) -> dict:
         for graph in GRAPH_NAMES
     }
     names = [str(n) for n in table["names"]]
-    gains = {name: NAMED_STYLE_GAINS.get(name, NAMED_STYLE_GAIN) for name in names}
+    gains = {style: gains.get(style, NAMED_STYLE_GAIN) for style in names}
     used = exaggerated(table["codes"], np.array([gains[name] for name in names]))
     styles = {  # "code": what the name uses (the engine's code_of_name)
         name: {
@@ -328,13 +345,13 @@ def main(argv: list[str] | None = None) -> dict:
     }
     trained_at = dt.datetime.fromtimestamp(payload["mtime"], dt.UTC).isoformat(timespec="seconds")
     entry = {
-        "name": MODEL_NAME,
+        "name": name,
         "family": "translator",
-        "version": MF.dated_version(MODEL_NAME, models_dir),
+        "version": MF.dated_version(name, models_dir),
         "files": files,
         "graphs": graphs,
-        "training_data": TRAINING_DATA,
-        "licence": LICENCE,
+        "training_data": list(training_data),
+        "licence": licence,
         "trained_at": trained_at,
         "metrics": {
             "takes_nearest_own_style": round(float(table["nearest_top1"]), 4),
@@ -361,14 +378,18 @@ def main(argv: list[str] | None = None) -> dict:
             "video_style_gain": VIDEO_STYLE_GAIN,
             "styles": styles,
             "output_smoothing": max(output_smoothing.CANDIDATES),  # until measured below
-        },
+        }
+        | (extra or {}),
     }
+    if payload.get("validation"):
+        entry["metrics"]["validation"] = payload["validation"]
     MF.put_entry(entry, models_dir)
     sizes = {p.name: p.stat().st_size for p in paths.values()}
-    print(f"manifest: {MODEL_NAME} {entry['version']}, graphs {sizes} bytes", flush=True)
-    entry["extra"]["output_smoothing"] = output_smoothing.choose(
-        "translator", models_dir, exporting=True
-    )
+    print(f"manifest: {name} {entry['version']}, graphs {sizes} bytes", flush=True)
+    if measure_smoothing:
+        entry["extra"]["output_smoothing"] = output_smoothing.choose(
+            "translator", models_dir, exporting=True
+        )
     return entry
 
 

@@ -1,10 +1,11 @@
 """What a lent GPU machine needs to train the translator, small enough to carry there.
 
-    python -m training.carry [--out cache/carry]
+    python -m training.carry [--out cache/carry] [--library LIB]
 
 A lent machine receives the working tree and at most 64 MiB in all, and no data folder.
-This writes into ``--out`` (ignored by git, as all of ``cache/``) Bandai's takes with their
-rotations stored as float16 (``bandai.npz``, 12 MB against 25 MB) and the pair alignments
+This writes into ``--out`` (ignored by git, as all of ``cache/``) the library's takes
+(``training.library``; Bandai's by default) with their rotations stored as float16
+(``bandai.npz``, 12 MB against 25 MB for Bandai) and the pair alignments
 (``translator_alignments.npz``), so that there
 
     MOTION_CACHE_DIR=cache/carry python -m training.translator.fit \\
@@ -20,6 +21,7 @@ import shutil
 from pathlib import Path
 
 from training import data as D
+from training.library import read_library
 
 ALIGNMENTS = "translator_alignments.npz"
 
@@ -27,6 +29,7 @@ ALIGNMENTS = "translator_alignments.npz"
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=D.REPO / "cache" / "carry")
+    parser.add_argument("--library", type=Path, help="the library (default: Bandai's)")
     args = parser.parse_args(argv)
     alignments = D.cache_dir() / ALIGNMENTS
     if not alignments.exists():
@@ -35,7 +38,13 @@ def main(argv: list[str] | None = None) -> int:
             "(it computes every pair's alignment in its first minute)"
         )
     args.out.mkdir(parents=True, exist_ok=True)
-    D.save_clips(args.out / "bandai.npz", D.load_bandai(), "carried", half=True)
+    if args.library:
+        clips = read_library(args.library)
+    else:
+        from training.translator.fit import bandai_library_clips
+
+        clips = bandai_library_clips()
+    D.save_clips(args.out / "bandai.npz", clips, "carried", half=True)
     shutil.copyfile(alignments, args.out / ALIGNMENTS)
     for p in sorted(args.out.iterdir()):
         print(f"{p}: {p.stat().st_size / 1e6:.1f} MB")

@@ -148,12 +148,17 @@ def read_clips(path: Path) -> list[Clip]:
 
 
 def _cached(name: str, sources: list[Path], build) -> list[Clip]:
-    fp = _fingerprint(sources)
+    return cached_by(name, _fingerprint(sources), build)
+
+
+def cached_by(name: str, fingerprint: str, build) -> list[Clip]:
+    """The clips of cache file ``name`` when it was built from ``fingerprint``, else
+    ``build()``'s, saved there."""
     path = cache_dir() / f"{name}.npz"
-    clips = _load_cache(path, fp)
+    clips = _load_cache(path, fingerprint)
     if clips is None:
         clips = build()
-        save_clips(path, clips, fp)
+        save_clips(path, clips, fingerprint)
     return clips
 
 

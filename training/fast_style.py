@@ -59,14 +59,26 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--threads", type=int, default=None, help="torch threads per process")
     p.add_argument("--jobs", type=int, default=1, help="styles trained at once, one process each")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--models-dir", type=Path, help="the teacher translator's models folder (the shipped)"
+    )
+    p.add_argument(
+        "--library", type=Path, help="content from this library (training.library) alone"
+    )
     return p.parse_args(argv)
 
 
-def teacher_clips() -> list:
+def teacher_clips(library: Path | None = None) -> list:
     """The content: every Bandai take, and the first ``DANCE_SECONDS`` of each Dance with
-    Melody take (canonical clips); four takes under ``MOTION_SMOKE``."""
+    Melody take (canonical clips); four takes under ``MOTION_SMOKE``. With ``library``,
+    that library's clips (``training.library``) instead."""
     from training import data as D
 
+    if library is not None:
+        from training.library import read_library
+
+        clips = read_library(library)
+        return clips[:4] if FC.smoke() else clips
     if FC.smoke():
         return D.load_bandai()[:4]
     frames = int(DANCE_SECONDS * Fe.FPS)
@@ -77,12 +89,12 @@ def teacher_clips() -> list:
     return D.load_bandai() + dances
 
 
-def content_motions() -> list:
+def content_motions(library: Path | None = None) -> list:
     """The canonical motions a style's targets are made from: :func:`teacher_clips`'s, each
     also mirrored, and each of those once more turning (``TURN_RATE``) and facing off its
     path (any way) at random: foreign clips turn and step sideways far more than Bandai's
     takes, and a network trained on those alone followed the translator less well there."""
-    motions = [c.motion for c in teacher_clips()]
+    motions = [c.motion for c in teacher_clips(library)]
     motions += [C.mirrored(m) for m in motions]
     rng = np.random.default_rng(VARIANT_SEED)
     rates = rng.normal(0.0, TURN_RATE, len(motions))
@@ -92,21 +104,25 @@ def content_motions() -> list:
     ]
 
 
-def style_names() -> list[str]:
-    """The shipped translator's styles."""
+def style_names(models_dir: Path | None = None) -> list[str]:
+    """The teacher translator's styles (the shipped one's, or that in ``models_dir``)."""
     from training.judges import load_engine
 
-    return list(load_engine("translator")[0].style_names)
+    return list(load_engine("translator", models_dir)[0].style_names)
 
 
-def targets(style: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Per content clip, the restyler's input ``(F, CONTROL_CHANNELS)`` and the shipped
-    translator's output for ``style``'s named code ``(F, OUTPUT_CHANNELS)``, standardised."""
+def targets(
+    style: str, models_dir: Path | None = None, library: Path | None = None
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per content clip, the restyler's input ``(F, CONTROL_CHANNELS)`` and the teacher
+    translator's output for ``style``'s named code ``(F, OUTPUT_CHANNELS)``, standardised:
+    the shipped translator on :func:`content_motions`, or that in ``models_dir`` on
+    ``library``'s."""
     from training.judges import load_engine
 
-    engine = load_engine("translator")[0]
+    engine = load_engine("translator", models_dir)[0]
     code = engine.code_of_name(style).code
-    controls = [engine.restyler_input(m) for m in content_motions()]
+    controls = [engine.restyler_input(m) for m in content_motions(library)]
     return controls, [engine.restyled(x, code) for x in controls]
 
 
@@ -165,7 +181,7 @@ def train_style(name: str, args: argparse.Namespace) -> dict:
     ``<checkpoint-dir>/style_<name>.pt``."""
     if args.threads:
         torch.set_num_threads(args.threads)
-    control, output = targets(name)
+    control, output = targets(name, args.models_dir, args.library)
     log = FC.Logger(f"style_{name}", Path(args.log_dir))
     net, result = StyleTrainer(name, control, output, args).train(log)
     log.close()
@@ -188,7 +204,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
     if FC.smoke():
         args.max_steps = args.max_steps or 3
-    names = style_names() if args.all else args.style
+    names = style_names(args.models_dir) if args.all else args.style
     if args.jobs == 1:
         return {name: train_style(name, args) for name in names}
     # one style per process, each seeded as alone (the same networks as one after another);

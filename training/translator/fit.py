@@ -1,8 +1,8 @@
-"""Training of the translator on Bandai's aligned pairs (``training.translator.pairs``).
+"""Training of the translator on a library's aligned pairs (``training.translator.pairs``).
 
     python -m training.translator.fit --out checkpoints/translator.pt [--steps N]
         [--resume] [--threads 1] [--log runs/translator] [--device cuda]
-        [--clips cache/bandai1.npz cache/bandai2.npz]
+        [--library LIB | --clips cache/carry/bandai.npz]
 
 Each step draws a batch of content windows and asks the restyler, given a style code,
 for the rotations of a real performance of the same action in that style, aligned in
@@ -18,9 +18,12 @@ The schedule of the shipped model is ``training/translator/schedule.json``
 training configuration and the feature statistics; ``--resume`` also needs the
 optimiser state, kept in ``<out>.state`` and never committed.
 
-``--device`` trains on another torch device (the weights are saved on the CPU all the
-same). ``--clips`` reads Bandai from ``training.data`` cache files instead of the data
-folder, for a machine without it; with the alignment cache
+The library (``training.library``: a folder of clips and ``labels.csv``) is Bandai's
+(``training.bandai_library``, written under ``cache/`` on first use) unless ``--library``
+names another; its labels say which takes are held out (the validation examples' content)
+and which may be mirrored. ``--device`` trains on another torch device (the weights are
+saved on the CPU all the same). ``--clips`` reads a library's clips from the cache files
+``training.carry`` writes, for a machine without the data; with the alignment cache
 (``$MOTION_CACHE_DIR/translator_alignments.npz``) holding every pair, such a machine needs
 no librosa either.
 """
@@ -42,9 +45,10 @@ from tqdm import tqdm
 
 from motion import canonical as C
 from motion import features as Fe
-from motion.styles import STYLE_ALIASES, canonical_style
+from motion.styles import STYLE_ALIASES
 from training import data as D
 from training.fk import RootLocalFK
+from training.library import read_library
 from training.translator.networks import (
     Discriminator,
     NetworkConfig,
@@ -52,6 +56,7 @@ from training.translator.networks import (
     count_parameters,
 )
 from training.translator.pairs import (
+    MIRRORED,
     Pairs,
     at_frames,
     encode_takes,
@@ -139,10 +144,18 @@ def hips_relative(rot: torch.Tensor, norm: dict, fk: RootLocalFK) -> torch.Tenso
     return pos - pos[..., :1, :]
 
 
+def bandai_library_clips() -> list[D.Clip]:
+    """The Bandai library's clips (``training.bandai_library``), written first if need be."""
+    from training import bandai_library
+
+    return read_library(bandai_library.write(bandai_library.default_folder()))
+
+
 def held_out_take(name: str) -> bool:
-    """One dataset-2 take in ten (and its mirror image), by a hash of its name: content of
-    the validation examples, never trained on. Dataset 2 performs each action in each
-    style four times, so its pairs stay complete without them."""
+    """Bandai's held-out takes (the Bandai library's ``held_out`` labels): one dataset-2
+    take in ten (and its mirror image), by a hash of its name: content of the validation
+    examples, never trained on. Dataset 2 performs each action in each style four times,
+    so its pairs stay complete without them."""
     base = name.removesuffix("~mirrored")
     return base.startswith("dataset-2") and zlib.crc32(base.encode()) % 10 == 0
 
@@ -156,16 +169,24 @@ class Trainer:
         device: str = "cpu",
         clips: list[D.Clip] | None = None,
     ) -> None:
-        """``clips``: Bandai's (``D.load_bandai()`` if not given)."""
+        """``clips``: a library's (``training.library``; the Bandai library if not given),
+        each labelled with its style and content and, in ``extra``, whether it is held out
+        and may be mirrored."""
         torch.set_num_threads(threads)
         torch.manual_seed(cfg.seed)
         self.cfg = cfg
         self.device = torch.device(device)
         self.rng = np.random.default_rng(cfg.seed)
-        clips = D.load_bandai() if clips is None else clips
-        self.styles = sorted({canonical_style(c.style) for c in clips})
+        clips = bandai_library_clips() if clips is None else clips
+        unlabelled = [c.name for c in clips if "held_out" not in c.extra]
+        if unlabelled:
+            raise ValueError(
+                f"{len(unlabelled)} clips carry no library labels (first {unlabelled[0]}): "
+                "read them with training.library.read_library"
+            )
+        self.styles = sorted({c.style for c in clips})
         net_cfg.num_styles = len(self.styles)
-        takes = encode_takes(clips, self.styles, cfg.views, self.rng, mirror=True)
+        takes = encode_takes(clips, self.styles, cfg.views, self.rng)
         self.stats = Fe.compute_stats(
             {
                 "content": [t.content for t in takes],
@@ -176,7 +197,8 @@ class Trainer:
         )
         for t in takes:
             t.inputs = Fe.restyler_input(t.content, t.style3d, self.stats)
-        held_out = {t.name for t in takes if held_out_take(t.name)}
+        held_out_clips = {c.name for c in clips if c.extra["held_out"]}
+        held_out = {t.name for t in takes if t.name.removesuffix(MIRRORED) in held_out_clips}
         self.pairs = Pairs([t for t in takes if t.name not in held_out], cfg.window, self.rng)
         self.val_pairs = Pairs(takes, cfg.window, self.rng, contents=held_out)
         self.alignment_cache = D.cache_dir() / "translator_alignments.npz"
@@ -196,6 +218,8 @@ class Trainer:
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
         self.step = 0
         self.stages: list[str] = []  # schedule stages the weights have finished
+        self.stage: str | None = None  # the stage these steps belong to (a resume continues it)
+        self.validation: dict[str, float] = {}  # the last validation's losses
         print(
             f"{len(takes)} takes, styles {self.styles}, "
             f"restyler {count_parameters(self.net.restyler):,} parameters"
@@ -360,10 +384,14 @@ class Trainer:
             "network": self.net.cfg.to_dict(),
             "train": asdict(self.cfg),
             "styles": self.styles,
-            "aliases": STYLE_ALIASES,
+            "aliases": {
+                a: s for a, s in STYLE_ALIASES.items() if s in self.styles and a not in self.styles
+            },
             "stats": stats,
             "step": self.step,
             "stages": self.stages + ([finished] if finished else []),
+            "stage": self.stage,
+            "validation": self.validation,
         }
         torch.save(payload, str(path) + ".tmp")
         os.replace(str(path) + ".tmp", path)
@@ -382,6 +410,7 @@ class Trainer:
         self.net.load_state_dict(payload["weights"])
         self.step = int(payload["step"])
         self.stages = list(payload.get("stages", []))
+        self.validation = dict(payload.get("validation", {}))
         state_path = Path(str(path) + ".state")
         if optimiser:
             state = torch.load(state_path, weights_only=False, map_location=self.device)
@@ -404,7 +433,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Train
     parser.add_argument("--stage", help="the schedule stage this run is (recorded when done)")
     parser.add_argument("--device", default="cpu", help="torch device to train on (cuda, ...)")
     parser.add_argument(
-        "--clips", type=Path, nargs="+", help="Bandai from these training.data cache files"
+        "--library", type=Path, help="the library to train on (training.library; Bandai's)"
+    )
+    parser.add_argument(
+        "--clips", type=Path, nargs="+", help="a library's clips from training.data cache files"
     )
     for name, value in asdict(TrainConfig()).items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=type(value), default=value)
@@ -416,8 +448,19 @@ def main(argv: list[str] | None = None) -> int:
     args, cfg = parse_args(argv)
     if os.environ.get("MOTION_SMOKE"):
         cfg.steps, cfg.val_every = 3, 2
-    clips = [c for p in args.clips for c in D.read_clips(p)] if args.clips else None
+    clips = None
+    if args.clips:
+        clips = [c for p in args.clips for c in D.read_clips(p)]
+    elif args.library:
+        clips = read_library(args.library)
     trainer = Trainer(cfg, NetworkConfig(channels=args.channels), args.threads, args.device, clips)
+    trainer.stage = args.stage
+    # drawing these moves the training's generator too (style windows), so they are drawn
+    # before a resume restores it: a resumed run draws what an uninterrupted one would
+    saved = trainer.rng, trainer.val_pairs.rng
+    trainer.rng = trainer.val_pairs.rng = np.random.default_rng(12345)
+    val = [trainer.batch(trainer.val_pairs) for _ in range(8 if trainer.val_pairs.drawable else 0)]
+    trainer.rng, trainer.val_pairs.rng = saved
     if args.resume:
         trainer.load(args.out, optimiser=True)
     elif args.init:
@@ -426,24 +469,27 @@ def main(argv: list[str] | None = None) -> int:
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(args.log))
-    saved = trainer.rng, trainer.val_pairs.rng
-    trainer.rng = trainer.val_pairs.rng = np.random.default_rng(12345)
-    val = [trainer.batch(trainer.val_pairs) for _ in range(8)]
-    trainer.rng, trainer.val_pairs.rng = saved
     started = last_save = time.time()
     first_step = trainer.step
+    progress = tqdm(
+        total=cfg.steps, initial=trainer.step, desc=f"translator {args.stage or ''}".strip(),
+        unit="step", mininterval=10, smoothing=0.05,
+    )  # fmt: skip
     while trainer.step < cfg.steps:
         terms = trainer.train_step()
+        progress.update(1)
         if trainer.step % 50 == 0:
             for k, v in terms.items():
                 writer.add_scalar(f"train/{k}", v, trainer.step)
         if trainer.step % cfg.val_every == 0 or trainer.step == cfg.steps:
             scores = trainer.validate(val)
+            trainer.validation = {k: round(v, 6) for k, v in scores.items()}
             for k, v in scores.items():
                 writer.add_scalar(f"val/{k}", v, trainer.step)
             rate = (trainer.step - first_step) / max(time.time() - started, 1e-9)
-            print(f"step {trainer.step} " + " ".join(f"{k} {v:.4f}" for k, v in scores.items())
-                  + f" ({rate:.2f} steps/s)", flush=True)  # fmt: skip
+            progress.write(f"step {trainer.step} "
+                           + " ".join(f"{k} {v:.4f}" for k, v in scores.items())
+                           + f" ({rate:.2f} steps/s)")  # fmt: skip
         out_of_time = args.max_minutes and time.time() - started > 60 * args.max_minutes
         if time.time() - last_save > 60 * cfg.checkpoint_minutes or out_of_time:
             trainer.save(args.out)
@@ -451,6 +497,7 @@ def main(argv: list[str] | None = None) -> int:
         if out_of_time:
             break
     trainer.save(args.out, finished=args.stage if trainer.step >= cfg.steps else None)
+    progress.close()
     writer.close()
     return 0
 

@@ -13,23 +13,25 @@ images.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from motion import canonical as C
 from motion import features as Fe
-from motion.styles import canonical_style
 from training.data import Clip
 
-# What a Bandai action becomes performed the other way round; the rest keep their name (a
-# bye or a guide with the other hand is still one).
-MIRRORED_CONTENT = {
-    "walk-left": "walk-right", "walk-right": "walk-left",
-    "walk-turn-left": "walk-turn-right", "walk-turn-right": "walk-turn-left",
-    "raise-up-left-hand": "raise-up-right-hand", "raise-up-right-hand": "raise-up-left-hand",
-    "wave-left-hand": "wave-right-hand", "wave-right-hand": "wave-left-hand",
-}  # fmt: skip
+MIRRORED = "~mirrored"  # the suffix of a mirror image's name and take
+_SIDE_WORDS = {"left": "right", "right": "left", "Left": "Right", "Right": "Left",
+               "LEFT": "RIGHT", "RIGHT": "LEFT"}  # fmt: skip
+
+
+def mirrored_content(content: str) -> str:
+    """What an action becomes performed the other way round: the words ``left`` and
+    ``right`` swapped (``walk-left`` -> ``walk-right``, ``wave-left-hand`` ->
+    ``wave-right-hand``); the rest keep their name (a bow is still a bow)."""
+    return "".join(_SIDE_WORDS.get(w, w) for w in re.split(r"([^A-Za-z]+)", content))
 
 
 def mirrored_clip(clip: Clip) -> Clip:
@@ -37,14 +39,13 @@ def mirrored_clip(clip: Clip) -> Clip:
     same style (a style has no side), the action renamed where it names a side, and a take
     of its own (``<take>~mirrored``)."""
     motion = C.mirrored(clip.motion)
-    content = MIRRORED_CONTENT.get(clip.content, clip.content) if clip.content else None
     return replace(
         clip,
-        name=f"{clip.name}~mirrored",
-        take=f"{clip.take}~mirrored",
+        name=f"{clip.name}{MIRRORED}",
+        take=f"{clip.take}{MIRRORED}",
         lrot=motion.lrot.astype(np.float32),
         root=motion.lpos[:, 1].astype(np.float32),  # the hips carry the travel
-        content=content,
+        content=mirrored_content(clip.content) if clip.content else None,
     )
 
 
@@ -94,16 +95,17 @@ class Take:
 
 
 def encode_takes(
-    clips: list[Clip], styles: list[str], views: int, rng: np.random.Generator, mirror: bool
+    clips: list[Clip], styles: list[str], views: int, rng: np.random.Generator
 ) -> list[Take]:
-    """Takes of ``clips`` (and of their mirror images with ``mirror``) with ``views`` 2D
-    projections each; style indices in ``styles`` after merging (-1 where none)."""
+    """Takes of ``clips`` and of the mirror images of those whose ``extra["mirror_ok"]``
+    allows it (default yes), with ``views`` 2D projections each; style indices in
+    ``styles`` (-1 where none)."""
     out = []
     for clip in clips:
-        for flipped in (False, True) if mirror else (False,):
+        for flipped in (False, True) if clip.extra.get("mirror_ok", True) else (False,):
             c = mirrored_clip(clip) if flipped else clip
             enc = Fe.encode(c.motion)
-            style = -1 if c.style is None else styles.index(canonical_style(c.style))
+            style = -1 if c.style is None else styles.index(c.style)
             out.append(
                 Take(
                     c.name,
@@ -194,6 +196,8 @@ class Pairs:
             s: sorted({(t.label, t.mirrored) for t in self.by_style[s]} & set(self.by_action))
             for s in self.styles
         }
+        # styles a pair can be drawn for (a validation set may lack some styles' actions)
+        self.drawable = [s for s in self.styles if self.actions_of[s]]
         self.alignments: dict[tuple[str, str], np.ndarray | None] = {}
         self._features: dict[str, np.ndarray] = {}
 
@@ -226,7 +230,7 @@ class Pairs:
         style (the content's own style too, then maybe the same take) and the frames of it
         aligned with the window."""
         while True:
-            style = self.styles[self.rng.integers(len(self.styles))]
+            style = self.drawable[self.rng.integers(len(self.drawable))]
             label, flipped = self.actions_of[style][self.rng.integers(len(self.actions_of[style]))]
             contents = self.by_action[label, flipped]
             targets = self.by_style_action[style, label, flipped]

@@ -1,0 +1,314 @@
+"""A studio's library (training.library) and its check (training.library_check), on real
+clips: the CMU fixture presented on other tools' rigs (tests/rigs.py) and as a glTF
+character (tests/gltf_files.py), labelled only in labels.csv."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import bvh
+from tests import rigs
+from tests.gltf_files import character_glb
+from training import library as L
+from training import library_check as LC
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _slowed(motion, fps: float):
+    """The fixture's walk played at ``fps`` (60 frames: 4 s at 15 fps, 3 s at 20 fps)."""
+    return motion.replace(fps=fps)
+
+
+def _reversed(motion):
+    return motion.replace(lrot=motion.lrot[::-1].copy(), lpos=motion.lpos[::-1].copy())
+
+
+def write_library(
+    root: Path, rows: list[tuple[str, object, str, str]], column: str = "", values=None
+) -> Path:
+    """``rows``: (file, motion or bytes, style, content); files named without labels;
+    ``column``: one more, with ``values`` per file."""
+    root.mkdir(parents=True, exist_ok=True)
+    with open(root / "labels.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["file", "style", "content", *([column] if column else [])])
+        for file, clip, style, content in rows:
+            path = root / file
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(clip, bytes):
+                path.write_bytes(clip)
+            elif clip is not None:
+                bvh.save(clip, path)
+            w.writerow([file, style, content, *([values[file]] if column else [])])
+    return root
+
+
+def good_rows() -> list:
+    """Two styles (the walk played slow and brisk) x two actions (forward, backward), two
+    takes each, on five rigs: CMU, Mixamo (ZXY), Unreal (rotated frames, extra root),
+    Biped (Z up, centimetres) and a glTF character."""
+    walk = rigs.load_fixture()
+    presentations = [
+        lambda m: m,
+        lambda m: rigs.with_channels(rigs.renamed(m, rigs.CMU_TO_MIXAMO), "ZXY"),
+        lambda m: rigs.with_extra_root(rigs.random_frames(rigs.renamed(m, rigs.CMU_TO_UNREAL), 1)),
+        lambda m: rigs.scaled(rigs.z_up(rigs.renamed(m, rigs.CMU_TO_BIPED)), 2.54),
+    ]
+    rows, k = [], 0
+    for style, fps in (("slow", 15.0), ("brisk", 20.0)):
+        for content, base in (("forward", walk), ("backward", _reversed(walk))):
+            for take in range(2):
+                motion = _slowed(base, fps)
+                k += 1
+                if style == "brisk" and content == "backward" and take == 1:
+                    rows.append((f"clips/c{k:02d}.glb", character_glb(motion), style, content))
+                else:
+                    show = presentations[k % len(presentations)]
+                    rows.append((f"clips/c{k:02d}.bvh", show(motion), style, content))
+    return rows
+
+
+@pytest.fixture(scope="module")
+def good_library(tmp_path_factory) -> Path:
+    """:func:`good_rows`, one forward take of each style held out."""
+    held = {r[0]: "yes" if r[0] in ("clips/c02.bvh", "clips/c06.bvh") else "no"
+            for r in good_rows()}  # fmt: skip
+    return write_library(tmp_path_factory.mktemp("lib") / "studio", good_rows(), "held_out", held)
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+
+
+def test_a_good_library_maps_every_rig_and_lists_its_pairs(good_library):
+    report = LC.check(good_library, measure=False)
+    assert report.problems == []
+    assert report.clips == 8
+    methods = {g["method"] for g in report.rigs}
+    assert methods <= {"names", "structure"} and len(report.rigs) >= 4
+    assert all(0.0 <= g["confidence"] <= 1.0 for g in report.rigs)
+    assert {g["up"] for g in report.rigs} >= {"Y", "Z"}
+    assert report.pairs == {"backward": ["brisk", "slow"], "forward": ["brisk", "slow"]}
+    assert report.styles["slow"] | {"contents": None} == {
+        "takes": 4,
+        "held_out": 1,
+        "contents": None,
+        "shared_contents": ["backward", "forward"],
+    }
+    text = LC.render(report)
+    assert "ready to train" in text and "forward: brisk, slow" in text
+
+
+def test_labels_come_from_the_table_and_clips_are_canonical(good_library):
+    clips = L.read_library(good_library)
+    assert [c.style for c in clips] == ["slow"] * 4 + ["brisk"] * 4
+    assert [c.content for c in clips] == ["forward", "forward", "backward", "backward"] * 2
+    assert all(c.lrot.shape[1] == 22 for c in clips)
+    # 60 frames at 15 fps span 59 / 15 s: 119 frames at 30 fps
+    assert [c.num_frames for c in clips[:2]] == [119, 119]
+    assert clips[0].take == "clips/c01" and clips[0].extra["file"] == "clips/c01.bvh"
+    assert all(c.extra["mirror_ok"] for c in clips)
+    # every presentation of one performance lands on the same canonical poses
+    same = [c for c in clips if c.style == "slow" and c.content == "forward"]
+    np.testing.assert_allclose(same[0].root, same[1].root, atol=2e-3)
+
+
+def test_the_cache_follows_the_content(tmp_path):
+    root = write_library(tmp_path / "lib", good_rows()[:4])
+    first = L.read_library(root)
+    assert {c.style for c in first} == {"slow"}
+    labels = (root / "labels.csv").read_text().replace("slow", "calm")
+    (root / "labels.csv").write_text(labels)
+    assert {c.style for c in L.read_library(root)} == {"calm"}
+
+
+def test_held_out_takes_by_default_and_by_label(tmp_path):
+    rows = [(f"t{i}.bvh", None, "s", "walk") for i in range(40)]
+    root = write_library(tmp_path / "lib", rows)
+    for i in range(40):
+        (root / f"t{i}.bvh").write_text("")
+    library, problems = L.read_labels(root)
+    assert problems == []
+    held = [r.take for r in library.rows if r.held_out]
+    assert held == [f"t{i}" for i in range(40) if L.held_out_by_rule(f"t{i}")] and held
+    given = {f"t{i}.bvh": "yes" if i == 3 else "no" for i in range(40)}
+    root = write_library(tmp_path / "lib2", rows, "held_out", given)
+    for i in range(40):
+        (root / f"t{i}.bvh").write_text("")
+    library, problems = L.read_labels(root)
+    assert problems == []
+    assert [r.take for r in library.rows if r.held_out] == ["t3"]
+
+
+def test_a_broken_library_names_each_problem_and_exits_non_zero(tmp_path):
+    rows = good_rows()[:4] + good_rows()[4:6]  # slow: 4 takes; brisk: forward only
+    # a rig with no humanoid in it: a four-joint chain
+    chain = rigs.load_fixture()
+    keep = [0, 1, 2, 3]
+    sk = chain.skeleton
+    from motion.skeleton import Motion, Skeleton
+
+    stick = Motion(
+        Skeleton(("a", "b", "c", "d"), sk.parents[keep], sk.offsets[keep],
+                 tuple(sk.channels[j] for j in keep), {}),
+        chain.fps, chain.lrot[:, keep], chain.lpos[:, keep],
+    )  # fmt: skip
+    rows += [
+        ("clips/stick.bvh", stick, "brisk", "backward"),
+        ("clips/gone.bvh", None, "brisk", "backward"),
+        ("clips/lonely.bvh", _slowed(rigs.load_fixture(), 15.0), "lonely", "forward"),
+    ]
+    root = write_library(tmp_path / "broken", rows)
+    result = subprocess.run(
+        [sys.executable, "-m", "model_export.train_library", "check", str(root)],
+        capture_output=True, text=True, cwd=REPO, timeout=300,
+    )  # fmt: skip
+    assert result.returncode == 1, result.stdout + result.stderr
+    problems = [line for line in result.stdout.splitlines() if line.startswith("problem:")]
+    assert any("clips/gone.bvh does not exist" in p for p in problems), problems
+    assert any("clips/stick.bvh" in p and "cannot be mapped" in p for p in problems), problems
+    assert any("style lonely has 1 take" in p for p in problems), problems
+    assert len(problems) == 3, problems
+    assert "estimate" not in result.stdout  # nothing measured or trained
+
+
+def test_a_style_sharing_no_action_is_a_problem(tmp_path):
+    rows = good_rows()
+    rows = [r if r[2] == "slow" else (r[0], r[1], r[2], "dance") for r in rows]
+    report = LC.check(write_library(tmp_path / "lib", rows), measure=False)
+    assert any("style brisk shares no action" in p for p in report.problems)
+    assert any("style slow shares no action" in p for p in report.problems)
+
+
+def test_rows_that_cannot_be_read_are_problems(tmp_path):
+    root = tmp_path / "lib"
+    root.mkdir()
+    (root / "a.bvh").write_text("HIERARCHY\nROOT Hips\n{ nonsense")
+    (root / "b.fbx").write_bytes(b"Kaydara FBX Binary")
+    (root / "labels.csv").write_text(
+        "file,style,content,mirror_ok\na.bvh,x,walk,maybe\nb.fbx,x,walk,\n../c.bvh,y,walk,\n"
+        ",y,walk,\n"
+    )
+    report = LC.check(root, measure=False)
+    text = "\n".join(report.problems)
+    assert "mirror_ok is 'maybe'" in text
+    assert "b.fbx: FBX is not read by training yet" in text
+    assert "../c.bvh lies outside the library folder" in text
+    assert "line 5: empty file" in text
+    assert "a.bvh: cannot be read" in text
+    library, _ = L.read_labels(tmp_path / "nowhere")
+    assert library.rows == [] and not LC.check(tmp_path / "nowhere", measure=False).ok
+
+
+def test_the_estimate_is_measured_here(good_library):
+    report = LC.check(good_library, translator_steps=1000)
+    e = report.estimate
+    assert e["steps_per_s_here"]["translator"] > 0 and e["steps_per_s_here"]["fast"] > 0
+    assert e["hours_here"] > e["hours_gpu"] > 0
+    assert e["fast_steps"] == 2 * LC.FAST_STEPS
+
+
+def _train_argv(library: Path, tmp_path: Path) -> list[str]:
+    return [
+        str(library), "-o", str(tmp_path / "models" / "studio"),
+        "--licence", "CC0 1.0 (the studio's own capture)", "--work", str(tmp_path / "work"),
+        "--runs", str(tmp_path / "runs"), "--device", "cpu", "--jobs", "1",
+    ]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_one_command_trains_both_families_that_the_service_loads(
+    good_library, tmp_path, monkeypatch
+):
+    pytest.importorskip("torch")
+    from model_export import train_library as TL
+    from training.judges import load_engine, transfer
+
+    monkeypatch.setenv("MOTION_SMOKE", "1")  # a few steps of each
+    argv = _train_argv(good_library, tmp_path)
+    assert TL.main(argv) == 0
+    out = tmp_path / "models" / "studio"
+    models = {m["name"]: m for m in json.loads((out / "manifest.json").read_text())["models"]}
+    assert set(models) == {"translator-studio", "fast-studio"}
+    content_hash = L.read_labels(good_library)[0].content_hash()
+    for entry in models.values():
+        assert entry["licence"] == "CC0 1.0 (the studio's own capture)"
+        assert entry["extra"]["library"] == "studio"
+        assert entry["extra"]["library_sha256"] == content_hash
+        assert [s["name"] for s in entry["extra"]["schedule"]] == ["paired"]
+    assert set(models["translator-studio"]["metrics"]["validation"]) >= {"rot", "pos"}
+    assert sorted(models["fast-studio"]["extra"]["styles"]) == ["brisk", "slow"]
+    assert list((tmp_path / "runs" / "translator" / "paired").glob("events.out.tfevents.*"))
+    canon = L.read_library(good_library)[0].motion
+    for family in ("translator", "fast"):
+        engine, entry, _ = load_engine(family, out)
+        assert entry.licence.startswith("CC0")
+        out_motion = transfer(family, engine, canon, "brisk", time_warp=False)
+        assert out_motion.num_frames == canon.num_frames
+        assert np.isfinite(out_motion.lrot).all()
+    # run again: everything is done, nothing trains
+    stamp = (tmp_path / "work" / "translator.pt").stat().st_mtime_ns
+    assert TL.main(argv) == 0
+    assert (tmp_path / "work" / "translator.pt").stat().st_mtime_ns == stamp
+
+
+@pytest.mark.slow
+def test_a_stopped_stage_resumes_to_the_weights_of_an_uninterrupted_one(
+    good_library, tmp_path, monkeypatch
+):
+    torch = pytest.importorskip("torch")
+    from model_export import train_library as TL
+    from training.translator import fit
+    from training.translator.schedule import load_schedule
+
+    monkeypatch.setenv("MOTION_SMOKE", "1")
+    stage = load_schedule()[0] | {"flags": load_schedule()[0]["flags"] | {"channels": 32}}
+    common = ["--library", str(good_library), "--log", str(tmp_path / "runs")]
+    whole = tmp_path / "whole.pt"
+    fit.main(TL.translator_flags(stage, whole, []) + common)
+    parted = tmp_path / "parted.pt"
+    # stopped after its first step (out of time), then continued as the command would
+    fit.main(TL.translator_flags(stage, parted, []) + common + ["--max-minutes", "1e-9"])
+    first = torch.load(parted, weights_only=False)
+    assert first["step"] == 1 and first["stages"] == [] and first["stage"] == "paired"
+    flags = TL.translator_flags(stage, parted, [])
+    assert "--resume" in flags
+    fit.main(flags + common)
+    a = torch.load(whole, weights_only=False)
+    b = torch.load(parted, weights_only=False)
+    assert a["step"] == b["step"] == 3 and b["stages"] == ["paired"]
+    for key, value in a["weights"].items():
+        assert torch.equal(value, b["weights"][key]), key
+
+
+@pytest.mark.slow
+def test_the_bandai_library_holds_what_training_read_by_file_names(data_dir, tmp_path):
+    """training.bandai_library's labels.csv: the clips, labels and held-out takes that
+    training.data.load_bandai and the name rule gave, in its order (so the shipped
+    schedule replays on the library)."""
+    from motion.styles import canonical_style
+    from training import bandai_library
+    from training import data as D
+    from training.translator.fit import held_out_take
+
+    root = bandai_library.write(tmp_path / "bandai", root=data_dir)
+    library, problems = L.read_labels(root)
+    assert problems == [] and len(library.rows) == 454
+    by_names = D.load_bandai(data_dir)
+    clips = L.read_library(root)
+    assert [c.name for c in clips] == [c.name for c in by_names]
+    for a, b in zip(by_names, clips, strict=True):
+        assert (b.take, b.style, b.content) == (a.take, canonical_style(a.style), a.content)
+        assert b.extra["held_out"] == held_out_take(a.name)
+        np.testing.assert_array_equal(a.lrot, b.lrot)
+        np.testing.assert_array_equal(a.root, b.root)
+    assert sum(c.extra["held_out"] for c in clips) == 29
