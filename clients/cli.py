@@ -10,6 +10,10 @@ back. Requests go out ``--jobs`` at a time. A 503 (or 429) is retried after the
 Retry-After the service sends, at most ``--retries`` times and ``--max-wait`` seconds
 each. A file that fails is named at the end, with the service's reason, and the others
 go on; the exit status is 1 if any failed, 2 for bad arguments.
+
+Where the service needs an API key, give it with ``--api-key`` or ``MOTION_API_KEY`` (the
+variable keeps it out of the process list and shell history); it goes out as
+``Authorization: Bearer``.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import argparse
 import asyncio
 import email.utils
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -29,6 +34,7 @@ from tqdm import tqdm
 CLIP_SUFFIXES = (".bvh", ".glb", ".gltf")
 AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 RETRY_STATUSES = (429, 503)
+API_KEY_ENV = "MOTION_API_KEY"
 EXTENSIONS = {
     "text/plain": ".bvh",
     "model/gltf-binary": ".glb",
@@ -164,6 +170,8 @@ async def run_one(
             outcome.error = describe_failure(response)
             if response.status_code in RETRY_STATUSES:
                 outcome.error += f" (gave up after {outcome.retries} retries)"
+            elif response.status_code == 401:
+                outcome.error += f" (give a key with --api-key or {API_KEY_ENV})"
             return outcome
         media_type = response.headers.get("content-type", "").split(";")[0].strip()
         suffix = EXTENSIONS.get(media_type, job.source.suffix or ".out")
@@ -192,7 +200,10 @@ async def run_all(request: Request, jobs: list[Job], args: argparse.Namespace) -
             progress.set_postfix_str(f"failed: {job.source.name}", refresh=True)
         return outcome
 
-    async with httpx.AsyncClient(base_url=args.url, timeout=timeout, limits=limits) as client:
+    headers = {"Authorization": f"Bearer {args.api_key}"} if args.api_key else {}
+    async with httpx.AsyncClient(
+        base_url=args.url, timeout=timeout, limits=limits, headers=headers
+    ) as client:
         try:
             return list(await asyncio.gather(*(bounded(client, job) for job in jobs)))
         finally:
@@ -231,6 +242,11 @@ def parser() -> argparse.ArgumentParser:
     def common(sub: argparse.ArgumentParser, what: str) -> None:
         sub.add_argument("files", nargs="+", metavar="FILE", help=f"{what} files or folders")
         sub.add_argument("--url", default="http://localhost:8000", help="the service")
+        sub.add_argument(
+            "--api-key",
+            default=os.environ.get(API_KEY_ENV) or None,
+            help=f"the service's API key, if it needs one (default: ${API_KEY_ENV})",
+        )
         sub.add_argument("-o", "--out", required=True, type=Path, help="folder for the results")
         sub.add_argument("-j", "--jobs", type=int, default=4, help="requests at once (4)")
         sub.add_argument("--retries", type=int, default=5, help="retries of a 503 per file (5)")

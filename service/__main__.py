@@ -1,4 +1,5 @@
 """``python -m service [--host H] [--port P] [--workers N] [--log-level L]``: run uvicorn.
+``python -m service keys add|list|revoke ...``: the API keys (:mod:`service.keys_cli`).
 
 Options override the ``MOTION_*`` environment; they are passed on to the worker processes
 through that environment, since each worker builds its own app with ``create_app()``.
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -58,7 +60,25 @@ def prepare_metrics_dir(workers: int) -> str | None:
     return path
 
 
+def prepare_key_state_dir() -> str | None:
+    """Point ``MOTION_KEY_STATE_DIR`` at a folder every worker of this replica shares, so
+    each key's limits count the requests of all of them (:mod:`service.key_limits`).
+    Unset, a new temporary folder, returned so that it is removed at the end."""
+    path = os.environ.get("MOTION_KEY_STATE_DIR")
+    if path:
+        Path(path).mkdir(parents=True, exist_ok=True)
+        return None
+    path = tempfile.mkdtemp(prefix="motion-keys-")
+    os.environ["MOTION_KEY_STATE_DIR"] = path
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["keys"]:
+        from service import keys_cli
+
+        sys.exit(keys_cli.main(argv[1:]))
     args = parse_args(argv)
     overrides = {k: v for k, v in vars(args).items() if v is not None}
 
@@ -72,6 +92,16 @@ def main(argv: list[str] | None = None) -> None:
         os.environ[f"MOTION_{key.upper()}"] = str(value)
 
     prepare_metrics_dir(settings.workers)
+    if settings.api_keys_file is not None:
+        from service.api_keys import KeysFile, KeysFileError
+
+        try:
+            KeysFile(settings.api_keys_file)
+        except KeysFileError as exc:
+            sys.exit(str(exc))
+        made_key_state_dir = prepare_key_state_dir()
+    else:
+        made_key_state_dir = None
     if settings.workers > 1:
         # compiled once here: workers compiling at once into one numba cache can leave
         # it inconsistent, and a worker that then loads it crashes
@@ -94,6 +124,8 @@ def main(argv: list[str] | None = None) -> None:
         access_log=False,  # the request-context middleware logs each request with its id
         timeout_graceful_shutdown=int(settings.request_timeout_s) + 1,
     )
+    if made_key_state_dir is not None:
+        shutil.rmtree(made_key_state_dir, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -83,6 +83,29 @@ class Settings(BaseSettings):
     )
     max_style_clips: int = Field(32, ge=1, description="clips one style is registered from")
 
+    api_keys_file: Path | None = Field(
+        None,
+        description="file of the API keys (name, scopes, SHA-256 of the key; `python -m "
+        "service keys add`): set, every /v1 request needs a key; unset, the service is open",
+    )
+    metrics_key_required: bool = Field(
+        False, description="GET /metrics also needs a key (when api_keys_file is set)"
+    )
+    key_requests_per_minute: float = Field(
+        600.0, ge=0, description="requests one API key may make a minute, per replica (0: any)"
+    )
+    key_burst: int = Field(
+        30, ge=1, description="requests one API key may make at once after a pause, per replica"
+    )
+    key_max_concurrent: int = Field(
+        8, ge=0, description="requests of one API key in progress at once, per replica (0: any)"
+    )
+    key_state_dir: Path | None = Field(
+        None,
+        description="folder where the workers of a replica share the keys' rate and "
+        "concurrency counts (`python -m service` makes one; default: a folder per process)",
+    )
+
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
     log_format: Literal["text", "json"] = Field("text", description="json: one object a line")
 

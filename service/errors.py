@@ -60,6 +60,13 @@ CATALOGUE: dict[str, ProblemType] = {
     for p in (
         ProblemType("invalid-request", 400, "Invalid request", "fields missing or malformed"),
         ProblemType("invalid-input", 400, "Invalid input", "a file we read but is malformed"),
+        ProblemType(
+            "unauthorized",
+            401,
+            "Unauthorized",
+            "no API key, or one that is not known (or was revoked), where keys are required",
+        ),
+        ProblemType("forbidden", 403, "Forbidden", "an API key without the scope a route needs"),
         ProblemType("not-found", 404, "Not found", "unknown path, style or model"),
         ProblemType("method-not-allowed", 405, "Method not allowed", "wrong method for a path"),
         ProblemType(
@@ -74,6 +81,12 @@ CATALOGUE: dict[str, ProblemType] = {
             "unsupported-media-type", 415, "Unsupported media type", "a format we do not read"
         ),
         ProblemType("unusable-input", 422, "Unusable input", "well-formed but unusable"),
+        ProblemType(
+            "too-many-requests",
+            429,
+            "Too many requests",
+            "an API key over its request rate or its requests in progress (per replica)",
+        ),
         ProblemType("internal-error", 500, "Internal server error", "a bug (logged, not shown)"),
         ProblemType("not-ready", 503, "Service not ready", "models not loaded (yet)"),
         ProblemType(
@@ -195,6 +208,25 @@ class UnsupportedMediaType(ServiceError):
     """A file format or content type we do not read (415)."""
 
     slug = "unsupported-media-type"
+
+
+class Unauthorized(ServiceError):
+    """No API key, or an unknown one, where keys are required (401 with
+    ``WWW-Authenticate: Bearer``)."""
+
+    slug = "unauthorized"
+
+
+class Forbidden(ServiceError):
+    """A known API key without the scope the route needs (403); pass ``required_scope=``."""
+
+    slug = "forbidden"
+
+
+class TooManyRequests(ServiceError):
+    """An API key over its request rate or concurrency limit (429 with ``Retry-After``)."""
+
+    slug = "too-many-requests"
 
 
 class NotReady(ServiceError):

@@ -12,7 +12,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from service import metrics
+from service import auth, metrics
 from service.config import Settings, available_cpus
 from service.dataplane import DataPlane
 from service.engines import EngineFactory, import_family_engines
@@ -43,6 +43,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
             settings.intra_op_threads,
             available_cpus(),
         )
+    auth.log_startup(settings)
     app.state.runner.start()
     app.state.registry.start()
     try:
@@ -50,6 +51,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     finally:
         app.state.runner.close()
         app.state.registry.close()
+        auth.close(app)
         metrics.mark_worker_dead()
 
 
@@ -79,8 +81,10 @@ def create_app(
     app.state.dataplane = DataPlane(app.state.registry, app.state.runner, registered)
 
     install_error_handlers(app)
-    # add_middleware puts each new one outside the previous: the request context is outermost
+    # add_middleware puts each new one outside the previous: the request context is outermost,
+    # and a request without a key is refused before the upload limit reads its body
     app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)
+    auth.install(app, settings)
     app.add_middleware(RequestContextMiddleware)
 
     for router in (health.router, models.router, styles.router, metrics_routes.router):

@@ -8,6 +8,7 @@ motion_http_request_duration_seconds       histogram  endpoint
 motion_inference_stage_duration_seconds    histogram  model, stage
 motion_frames_processed_total              counter    endpoint, model
 motion_errors_total                        counter    type (problem slug: ``too-large``...)
+motion_key_requests_total                  counter    key (the API key's name), endpoint, status
 motion_inferences_in_flight                gauge      (none): inferences holding a slot
 motion_inference_queue_depth               gauge      (none): requests waiting for a slot
 motion_model_info                          gauge      name, version, family, sha256 (1 = loaded)
@@ -83,6 +84,11 @@ ERRORS = Counter(
     "Problem responses sent, by problem type (the slug of the problem's type URI)",
     ["type"],
 )
+KEY_REQUESTS = Counter(
+    "motion_key_requests",
+    "Requests that came with a known API key, by the key's name, route template and status",
+    ["key", "endpoint", "status"],
+)
 IN_FLIGHT = Gauge(
     "motion_inferences_in_flight",
     "Inferences holding a slot of the pool (running, or abandoned by a timeout and still running)",
@@ -121,6 +127,11 @@ def observe_request(endpoint: str, method: str, status: int, seconds: float) -> 
 def count_error(slug: str) -> None:
     """Count one problem response of type ``slug`` (called where problems are built)."""
     ERRORS.labels(type=slug).inc()
+
+
+def count_key_request(key: str, endpoint: str, status: int) -> None:
+    """Count one request of the API key named ``key`` (its name, never the key)."""
+    KEY_REQUESTS.labels(key=key, endpoint=endpoint, status=str(status) if status else "none").inc()
 
 
 def count_frames(endpoint: str, model: str, frames: int) -> None:

@@ -77,7 +77,8 @@ def _route_templates(app) -> list[tuple[re.Pattern, str]]:
 class RequestContextMiddleware:
     """Gives each HTTP request an id (``scope["state"]["request_id"]`` and the log context),
     echoes it as ``X-Request-Id``, writes one access-log line per request (with ``method``,
-    ``path``, ``status`` and ``duration_ms`` as structured fields), counts it in the request
+    ``path``, ``status``, ``duration_ms`` and the API key's name, ``key``, as structured
+    fields), counts it in the request
     metrics, and turns an exception that escaped every handler into a logged 500 problem
     without a traceback."""
 
@@ -114,18 +115,24 @@ class RequestContextMiddleware:
         finally:
             elapsed = time.perf_counter() - started_at
             method, path = scope["method"], scope["path"]
-            metrics.observe_request(endpoint_of(scope), method, status, elapsed)
+            endpoint = endpoint_of(scope)
+            metrics.observe_request(endpoint, method, status, elapsed)
+            key = scope["state"].get("key_name")  # set by service.auth: a name, never the key
+            if key is not None:
+                metrics.count_key_request(key, endpoint, status)
             logger.info(
-                "%s %s %s %.1fms",
+                "%s %s %s %.1fms%s",
                 method,
                 path,
                 status or "-",
                 elapsed * 1000.0,
+                f" key={key}" if key is not None else "",
                 extra={
                     "method": method,
                     "path": path,
                     "status": status or None,
                     "duration_ms": round(elapsed * 1000.0, 3),
+                    **({"key": key} if key is not None else {}),
                 },
             )
             request_id_var.reset(token)

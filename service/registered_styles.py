@@ -71,6 +71,7 @@ class RegisteredStyle:
     spread: float  # mean distance of the clips' codes from the style's code
     sources: tuple[str, ...] = ()
     created: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
+    registered_by: str | None = None  # the name of the API key that registered it
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -84,6 +85,7 @@ class RegisteredStyle:
             "spread": self.spread,
             "sources": list(self.sources),
             "created": self.created,
+            "registered_by": self.registered_by,
         }
 
     @classmethod
@@ -103,6 +105,7 @@ class RegisteredStyle:
                 spread=float(doc["spread"]),
                 sources=tuple(str(s) for s in doc.get("sources", ())),
                 created=str(doc.get("created", "")),
+                registered_by=str(doc["registered_by"]) if doc.get("registered_by") else None,
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a registered style: {exc}") from None
@@ -121,6 +124,7 @@ class RegisteredStyle:
             "frames": self.frames,
             "created": self.created,
             "model_version": self.version,
+            **({"registered_by": self.registered_by} if self.registered_by else {}),
         }
 
 

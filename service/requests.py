@@ -62,6 +62,7 @@ class RegisterStyleRequest:
     clips: list[Upload]
     mapping: dict[str, str] | None = None
     speed: float = 1.0
+    registered_by: str | None = None  # the name of the API key that asked
 
 
 @dataclass

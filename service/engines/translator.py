@@ -448,6 +448,7 @@ class TranslatorEngine(Engine):
             frames=job.frames,
             spread=round(spread, 4),
             sources=tuple(u.filename or "" for u in request.clips),
+            registered_by=request.registered_by,
         )
         with timer.stage("store"):
             self.registered.add(style)

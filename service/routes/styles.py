@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Form, Path, UploadFile
+from fastapi import APIRouter, File, Form, Path, Request, UploadFile
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict
 
+from service import auth
 from service.config import Settings
 from service.deps import DataPlaneDep, RegistryDep, SettingsDep
 from service.errors import InvalidRequest, PayloadTooLarge, problem_responses
@@ -54,6 +55,7 @@ class RegisteredStyleInfo(BaseModel):
     spread: float
     model: dict[str, str]
     created: str
+    registered_by: str | None = None  # the name of the API key that registered it
     warnings: list[str]
     timings_ms: dict[str, float]
 
@@ -84,8 +86,10 @@ def check_clip_count(count: int, settings: Settings) -> None:
     status_code=201,
     response_model=RegisteredStyleInfo,
     responses=problem_responses(400, 404, 409, 413, 415, 422, 503, 504, 507),
+    openapi_extra=auth.requires("manage"),
 )
 async def register_style(
+    request: Request,
     settings: SettingsDep,
     plane: DataPlaneDep,
     name: Annotated[str, Form(min_length=1, max_length=100, description=NAME_RULE)],
@@ -111,6 +115,7 @@ async def register_style(
         clips=[upload(clip, settings, field="clips") for clip in clips],
         mapping=parse_mapping(mapping),
         speed=speed,
+        registered_by=auth.key_name(request.scope),
     )
     done: Registration = await plane.infer("translator", job)
     body: dict[str, Any] = {
@@ -131,6 +136,7 @@ async def register_style(
     status_code=204,
     response_class=Response,
     responses=problem_responses(404, 409, 503, 507),
+    openapi_extra=auth.requires("manage"),
 )
 async def delete_style(
     plane: DataPlaneDep,

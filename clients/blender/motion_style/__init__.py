@@ -4,6 +4,10 @@ A panel in the 3D view's sidebar (N, tab "Motion Style"): server URL, style (fro
 service's ``GET /v1/styles``), strength, Restyle. The operator ``motion_style.transfer``
 (properties ``server``, ``style_name``, ``strength``) also runs from scripts and in
 ``blender -b``; the result becomes a new action on the same armature, the original kept.
+
+A service that needs an API key gets the one in the add-on's preferences (Edit >
+Preferences > Add-ons > Motion Style), else ``$MOTION_API_KEY``. Preferences live in
+Blender's user settings, never in a .blend file, so a scene passed on carries no key.
 """
 
 bl_info = {
@@ -22,6 +26,26 @@ from . import restyle, service  # noqa: E402
 
 DEFAULT_SERVER = "http://localhost:8000"
 _style_items: list[tuple[str, str, str]] = []  # Blender needs the enum's strings kept alive
+
+
+class MotionStylePreferences(bpy.types.AddonPreferences):
+    bl_idname = __name__
+
+    api_key: bpy.props.StringProperty(
+        name="API key",
+        subtype="PASSWORD",
+        default="",
+        description="the service's API key, if it needs one (else $MOTION_API_KEY)",
+    )
+
+    def draw(self, context):
+        self.layout.prop(self, "api_key")
+
+
+def api_key(context) -> str:
+    """The key in the add-on's preferences ("" leaves it to $MOTION_API_KEY)."""
+    addon = context.preferences.addons.get(__name__)
+    return addon.preferences.api_key if addon is not None and addon.preferences else ""
 
 
 def style_items(self, context):
@@ -48,7 +72,7 @@ class MOTION_STYLE_OT_refresh_styles(bpy.types.Operator):
     def execute(self, context):
         server = self.server or context.scene.motion_style_server
         try:
-            names = service.styles(server)
+            names = service.styles(server, api_key(context))
         except service.ServiceError as exc:
             self.report({"ERROR"}, f"Motion Style: {exc}")
             return {"CANCELLED"}
@@ -83,7 +107,9 @@ class MOTION_STYLE_OT_transfer(bpy.types.Operator):
             self.report({"ERROR"}, "Motion Style: no style chosen")
             return {"CANCELLED"}
         try:
-            action = restyle.restyle(context, obj, self.server, self.style_name, self.strength)
+            action = restyle.restyle(
+                context, obj, self.server, self.style_name, self.strength, api_key(context)
+            )
         except service.ServiceError as exc:
             self.report({"ERROR"}, f"Motion Style: {exc}")
             return {"CANCELLED"}
@@ -114,7 +140,12 @@ class VIEW3D_PT_motion_style(bpy.types.Panel):
             layout.label(text=problem, icon="INFO")
 
 
-CLASSES = (MOTION_STYLE_OT_refresh_styles, MOTION_STYLE_OT_transfer, VIEW3D_PT_motion_style)
+CLASSES = (
+    MotionStylePreferences,
+    MOTION_STYLE_OT_refresh_styles,
+    MOTION_STYLE_OT_transfer,
+    VIEW3D_PT_motion_style,
+)
 
 
 def register():

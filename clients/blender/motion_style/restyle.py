@@ -139,7 +139,7 @@ def remove_scratch(scratch) -> None:
         bpy.data.actions.remove(action)
 
 
-def restyle(context, obj, server: str, style_name: str, strength: float):
+def restyle(context, obj, server: str, style_name: str, strength: float, api_key: str = ""):
     """The new action (assigned to ``obj``; the original is kept with a fake user)."""
     original = obj.animation_data.action
     start, _ = action_frames(obj)
@@ -149,7 +149,7 @@ def restyle(context, obj, server: str, style_name: str, strength: float):
         sent, answer = os.path.join(folder, "content.bvh"), os.path.join(folder, "result.bvh")
         export_bvh(context, obj, sent)
         with open(sent, "rb") as f:
-            result = service.transfer(server, f.read(), style_name, strength)
+            result = service.transfer(server, f.read(), style_name, strength, api_key)
         with open(answer, "wb") as f:
             f.write(result)
         frames = frames_in(result)

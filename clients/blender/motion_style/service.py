@@ -3,13 +3,24 @@
 from __future__ import annotations
 
 import json
+import os
 import urllib.error
 import urllib.request
 import uuid
 
+API_KEY_ENV = "MOTION_API_KEY"
+
 
 class ServiceError(Exception):
     """The service could not be reached or answered with a problem; the message says which."""
+
+
+def _with_key(request: urllib.request.Request, api_key: str) -> urllib.request.Request:
+    """``request`` with ``Authorization: Bearer`` the key given, else ``$MOTION_API_KEY``."""
+    key = (api_key or os.environ.get(API_KEY_ENV, "")).strip()
+    if key:
+        request.add_header("Authorization", f"Bearer {key}")
+    return request
 
 
 def _open(request: urllib.request.Request, timeout: float) -> bytes:
@@ -23,15 +34,18 @@ def _open(request: urllib.request.Request, timeout: float) -> bytes:
             detail = problem.get("detail") or problem.get("title")
         except (ValueError, AttributeError):
             detail = body[:200].decode("utf-8", "replace")
+        if exc.code == 401:
+            detail += " (set the API key in the add-on's preferences or MOTION_API_KEY)"
         raise ServiceError(f"{exc.code}: {detail}") from None
     except (urllib.error.URLError, OSError) as exc:
         reason = getattr(exc, "reason", exc)
         raise ServiceError(f"cannot reach {request.full_url}: {reason}") from None
 
 
-def styles(server: str, timeout: float = 10.0) -> list[str]:
+def styles(server: str, api_key: str = "", timeout: float = 10.0) -> list[str]:
     """Names of the translator's styles (``GET /v1/styles``), shipped and registered."""
-    body = _open(urllib.request.Request(server.rstrip("/") + "/v1/styles"), timeout)
+    request = _with_key(urllib.request.Request(server.rstrip("/") + "/v1/styles"), api_key)
+    body = _open(request, timeout)
     try:
         listing = json.loads(body)
         return [s["name"] for s in listing.get("translator", [])]
@@ -40,7 +54,12 @@ def styles(server: str, timeout: float = 10.0) -> list[str]:
 
 
 def transfer(
-    server: str, content: bytes, style_name: str, strength: float, timeout: float = 300.0
+    server: str,
+    content: bytes,
+    style_name: str,
+    strength: float,
+    api_key: str = "",
+    timeout: float = 300.0,
 ) -> bytes:
     """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``."""
     boundary = uuid.uuid4().hex
@@ -62,4 +81,4 @@ def transfer(
         headers={"Content-Type": f"multipart/form-data; boundary={boundary}"},
         method="POST",
     )
-    return _open(request, timeout)
+    return _open(_with_key(request, api_key), timeout)
