@@ -1,8 +1,14 @@
 """Run inside Blender: ``blender -b --factory-startup --python addon_driver.py -- ZIP CLIP
-SERVER STYLE STRENGTH OUT_FOLDER``. Installs and enables the add-on from its zip, imports
-the clip (BVH, or a GLB through Blender's glTF importer), loads the styles, runs ``motion_style.transfer`` on the armature, and writes
-what happened to OUT_FOLDER/report.json, with BVH exports of the action before
-(before.bvh) and after (after.bvh) for the test to compare with the service's answer."""
+SERVER STYLE STRENGTH OUT_FOLDER [KEY_SOURCE]``. Installs and enables the add-on from its
+zip, imports the clip (BVH, or a GLB through Blender's glTF importer), loads the styles,
+runs ``motion_style.transfer`` on the armature, and writes what happened to
+OUT_FOLDER/report.json, with BVH exports of the action before (before.bvh) and after
+(after.bvh) for the test to compare with the service's answer, and the scene saved as
+OUT_FOLDER/scene.blend.
+
+KEY_SOURCE ``preferences``: the service needs a key; the driver first loads the styles
+without one, then puts ``$MOTION_STYLE_TEST_KEY`` in the add-on's preferences.
+``environment``: the add-on finds the key in ``$MOTION_API_KEY`` itself."""
 
 import json
 import os
@@ -19,7 +25,9 @@ def export(obj, path):
 
 
 def main():
-    zip_path, clip_path, server, style, strength, out = sys.argv[sys.argv.index("--") + 1 :]
+    args = sys.argv[sys.argv.index("--") + 1 :]
+    zip_path, clip_path, server, style, strength, out = args[:6]
+    key_source = args[6] if len(args) > 6 else ""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.preferences.addon_install(filepath=zip_path)
     addon_utils.enable("motion_style", default_set=True, handle_error=None)
@@ -52,6 +60,14 @@ def main():
     }
     export(armature, os.path.join(out, "before.bvh"))
     bpy.context.scene.motion_style_server = server
+    if key_source == "preferences":
+        try:
+            bpy.ops.motion_style.refresh_styles()
+            report["refresh_without_key"] = "no error"
+        except RuntimeError as exc:
+            report["refresh_without_key"] = str(exc)
+        preferences = bpy.context.preferences.addons["motion_style"].preferences
+        preferences.api_key = os.environ["MOTION_STYLE_TEST_KEY"]
     report["refresh"] = sorted(bpy.ops.motion_style.refresh_styles())
     report["styles"] = [item[0] for item in motion_style.style_items(None, bpy.context)]
     report["transfer"] = sorted(
@@ -78,6 +94,7 @@ def main():
     except RuntimeError as exc:
         report["bad_style"] = str(exc)
     report["action_after_bad_style"] = armature.animation_data.action.name
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(out, "scene.blend"), compress=False)
     with open(os.path.join(out, "report.json"), "w") as f:
         json.dump(report, f)
 

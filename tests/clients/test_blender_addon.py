@@ -1,7 +1,9 @@
 """The Blender add-on in headless Blender (Debian's 3.4, ``blender -b``) against the real
-service: installed from the zip ``make blender-addon`` builds, it restyles an imported
-BVH's action into a new action on the same armature, keeping the original, and the new
-action performs exactly the service's answer."""
+service, which needs an API key: installed from the zip ``make blender-addon`` builds, it
+restyles an imported BVH's action into a new action on the same armature, keeping the
+original, and the new action performs exactly the service's answer. The key comes from the
+add-on's preferences (after a refusal without it) or ``$MOTION_API_KEY``, and the saved
+.blend file does not hold it."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import pytest
 from clients import addon_zip
 from motion import bvh
 from motion import kinematics as K
+from service import api_keys
 from tests.gltf_files import BLENDER, REPO, blender_run
 from tests.rigs import load_fixture
 from tests.server import ServerProcess
@@ -25,27 +28,34 @@ DRIVER = REPO / "tests" / "blender" / "addon_driver.py"
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
+    """The service with keys on, and the key of ``blender`` (scope ``use``)."""
     if BLENDER is None:
         pytest.skip("Blender is not installed (apt-get install blender python3-numpy)")
-    with ServerProcess(log_path=tmp_path_factory.mktemp("addon-server") / "server.log") as running:
-        yield running
+    folder = tmp_path_factory.mktemp("addon-server")
+    key = api_keys.add_key(folder / "api-keys", "blender", frozenset({"use"}))
+    env = {"MOTION_API_KEYS_FILE": str(folder / "api-keys")}
+    with ServerProcess(env=env, log_path=folder / "server.log") as running:
+        yield running, key
 
 
-@pytest.mark.parametrize("source", ["bvh", "glb"])
-def test_addon_restyles_an_action_in_headless_blender(server, source, tmp_path):
+@pytest.mark.parametrize(("source", "key_source"), [("bvh", "preferences"), ("glb", "environment")])
+def test_addon_restyles_an_action_in_headless_blender(server, source, key_source, tmp_path):
     """``bvh``: an armature Blender's BVH importer built; ``glb``: one its glTF importer
     built from Blender's GLB of the same walk (other bone orientations, a skinned mesh)."""
+    server, key = server
     package = addon_zip.build(tmp_path / "motion_style.zip")
     clip = tmp_path / "walk.bvh"
     bvh.save(load_fixture().slice(0, 60), clip)
     if source == "glb":
         blender_run("export", str(clip), str(tmp_path / "walk.glb"))
         clip = tmp_path / "walk.glb"
-    env = {**os.environ, "BLENDER_USER_SCRIPTS": str(tmp_path / "blender-user")}
+    env = {k: v for k, v in os.environ.items() if k != "MOTION_API_KEY"}
+    env["BLENDER_USER_SCRIPTS"] = str(tmp_path / "blender-user")
+    env["MOTION_STYLE_TEST_KEY" if key_source == "preferences" else "MOTION_API_KEY"] = key
     result = subprocess.run(
         [BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
          str(DRIVER), "--", str(package), str(clip), server.url, "elderly", "1.0",
-         str(tmp_path)],
+         str(tmp_path), key_source],
         capture_output=True, text=True, timeout=180, env=env,
     )  # fmt: skip
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
@@ -54,6 +64,7 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, tmp_path):
     answer = httpx.post(
         server.url + "/v1/transfer", files={"content": ("walk.bvh", sent)},
         data={"style_name": "elderly", "strength": "1.0"}, timeout=120,
+        headers={"Authorization": f"Bearer {key}"},
     )  # fmt: skip
     assert answer.status_code == 200, answer.text
     report = json.loads((tmp_path / "report.json").read_text())
@@ -76,6 +87,12 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, tmp_path):
     assert report["original_curves_after"] == report["original_curves"]
     assert report["objects_after"] == report["objects_before"]  # no scratch armature left
     assert "404" in report["bad_style"] and report["action_after_bad_style"] == new
+    if key_source == "preferences":  # refused without it, and told where a key goes
+        assert "401" in report["refresh_without_key"]
+        assert "preferences" in report["refresh_without_key"]
+    scene = (tmp_path / "scene.blend").read_bytes()
+    assert new.encode() in scene  # the saved file holds the new action, not the key
+    assert key.encode() not in scene and key.removeprefix("msk_")[:12].encode() not in scene
 
     # the new action performs the service's answer: same joint positions every frame
     performed = bvh.load(tmp_path / "after.bvh")
