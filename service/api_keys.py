@@ -221,11 +221,19 @@ def read_keys(path: Path) -> list[ApiKey]:
 
 
 def _write(path: Path, keys: list[ApiKey]) -> None:
-    """Replace ``path`` whole (mode 0600): a new file in its folder, renamed over it."""
+    """Replace ``path`` whole: a new file in its folder, renamed over it, with the mode of
+    the file it replaces (0600 for a new one; a container's user may need it readable)."""
     text = HEADER + "".join(k.line() for k in keys)
+    try:
+        mode = path.stat().st_mode & 0o777
+    except FileNotFoundError:
+        mode = 0o600
+    except OSError as exc:
+        raise KeysFileError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
         try:
+            os.fchmod(fd, mode)
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(text)
                 f.flush()

@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 REPO_MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
@@ -112,6 +112,12 @@ class Settings(BaseSettings):
     debug_routes: bool = Field(
         False, description="serve /_debug/* (slow requests for shutdown tests); never in production"
     )
+
+    @field_validator("api_keys_file", "key_state_dir", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        # MOTION_API_KEYS_FILE= (as compose's ${VAR:-} writes it) means none, not "."
+        return None if isinstance(value, str) and not value.strip() else value
 
     @property
     def oversubscribed(self) -> bool:

@@ -6,9 +6,12 @@
 // the problem+json detail is shown. The answer comes in the input's format (a GLB input
 // gets its GLB back with the new animation), and Download saves it as it came.
 //
+// Where the service needs an API key (a 401), the page asks for one and sends it with each
+// request as Authorization: Bearer; it is kept in sessionStorage (this tab), never in the URL.
+//
 // Tests read window.motionPreview: {webgl, styles, playing, time, duration, input: {loaded,
 // frames, fps, frame, ticks, name, format}, result: {...}, download: {name, type, size,
-// bytes, text (BVH only)}, lastMessage}.
+// bytes, text (BVH only)}, lastMessage, needsKey}.
 
 import * as THREE from './vendor/three/three.module.min.js';
 import { BVHLoader } from './vendor/three/BVHLoader.js';
@@ -33,8 +36,58 @@ const state = {
   time: 0,
   duration: 0,
   lastMessage: '',
+  needsKey: false,
 };
 window.motionPreview = state;
+
+// ---------------------------------------------------------------------------------------------
+// The API key, when the service needs one
+
+const KEY_STORAGE = 'motion-style-api-key';
+
+function storedKey() {
+  try {
+    return sessionStorage.getItem(KEY_STORAGE) || '';
+  } catch {
+    return '';
+  }
+}
+
+// fetch() with the stored key; a 401 shows the key form (the caller still gets the answer)
+async function apiFetch(url, options = {}) {
+  const headers = new Headers(options.headers || {});
+  const key = storedKey();
+  if (key) headers.set('Authorization', `Bearer ${key}`);
+  const response = await fetch(url, { ...options, headers });
+  if (response.status === 401) askForKey(Boolean(key));
+  return response;
+}
+
+function askForKey(rejected) {
+  state.needsKey = true;
+  $('key-form').hidden = false;
+  $('api-key').value = '';
+  $('api-key').focus();
+  say(rejected ? 'The service did not accept this API key: enter another.'
+    : 'This service needs an API key: enter it above.', 'error');
+}
+
+function useKey(event) {
+  event.preventDefault();
+  const key = $('api-key').value.trim();
+  if (!key) return;
+  try {
+    sessionStorage.setItem(KEY_STORAGE, key);
+  } catch {
+    say('This browser keeps no session storage: the key cannot be kept.', 'error');
+    return;
+  }
+  $('api-key').value = '';
+  $('key-form').hidden = true;
+  state.needsKey = false;
+  say('Key set.');
+  loadStyles();
+}
 
 // ---------------------------------------------------------------------------------------------
 // Reading clips: BVH text or glTF bytes, told apart by their first bytes (as the service does)
@@ -338,11 +391,11 @@ function styleNames() {
 async function loadStyles() {
   const select = $('style-name');
   try {
-    const response = await fetch('/v1/styles', { headers: { Accept: 'application/json' } });
+    const response = await apiFetch('/v1/styles', { headers: { Accept: 'application/json' } });
     if (!response.ok) throw new Error(await describeFailure(response));
     state.styles = await response.json();
   } catch (error) {
-    say(`Could not list the styles: ${error.message}`, 'error');
+    if (!state.needsKey) say(`Could not list the styles: ${error.message}`, 'error');
   }
   select.replaceChildren();
   let count = 0;
@@ -497,13 +550,15 @@ async function run(event) {
   say(`Running ${request.url}...`);
   try {
     // no ?format: the answer comes in the input's format (a GLB input gets its GLB back)
-    const response = await fetch(request.url, {
+    const response = await apiFetch(request.url, {
       method: 'POST',
       body: request.form,
       headers: { Accept: 'text/plain, model/gltf-binary, application/problem+json' },
     });
     if (!response.ok) {
-      say(`${request.url} failed: ${await describeFailure(response)}`, 'error');
+      if (response.status !== 401) {  // a 401 has asked for a key already
+        say(`${request.url} failed: ${await describeFailure(response)}`, 'error');
+      }
       return;
     }
     const type = (response.headers.get('content-type') || 'text/plain').split(';')[0];
@@ -535,6 +590,7 @@ async function run(event) {
 // ---------------------------------------------------------------------------------------------
 // Wiring
 
+$('key-form').addEventListener('submit', useKey);
 $('content-file').addEventListener('change', showInput);
 $('controls').addEventListener('submit', run);
 $('mix-add').addEventListener('click', () => addMixRow());

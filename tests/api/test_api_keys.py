@@ -185,6 +185,27 @@ def test_a_revoked_key_is_refused_at_once_without_a_restart(make_client, tmp_pat
     assert_problem(client.get("/v1/nowhere", headers=bearer(third)), 401, "unauthorized")
 
 
+def test_a_secret_updated_the_way_the_kubelet_does_it_is_read_again(tmp_path, capsys):
+    """The kubelet writes a Secret's files into a new timestamped folder and swaps the
+    ``..data`` link to it; the file path goes through that link."""
+    staging = tmp_path / "staging"
+    first = add(staging, "first", "use", capsys)
+    second = add(staging, "second", "use", capsys)
+    mount = tmp_path / "mount"
+    (mount / "..2026_11_28_01").mkdir(parents=True)
+    (mount / "..2026_11_28_01" / "api-keys").write_bytes(staging.read_bytes())
+    (mount / "..data").symlink_to("..2026_11_28_01")
+    (mount / "api-keys").symlink_to("..data/api-keys")
+    keys = api_keys.KeysFile(mount / "api-keys")
+    assert keys.identify(first) and keys.identify(second)
+    api_keys.revoke_key(staging, "first")
+    (mount / "..2026_11_28_02").mkdir()
+    (mount / "..2026_11_28_02" / "api-keys").write_bytes(staging.read_bytes())
+    (mount / "..data_tmp").symlink_to("..2026_11_28_02")
+    os.replace(mount / "..data_tmp", mount / "..data")
+    assert keys.identify(first) is None and keys.identify(second)
+
+
 def test_a_key_over_its_rate_gets_429_with_retry_after_while_another_key_gets_through(
     make_client, tmp_path
 ):
@@ -273,6 +294,10 @@ def test_the_keys_file_holds_digests_and_a_bad_line_is_skipped_without_its_text(
     text = keys_file.read_text()
     assert key not in text and api_keys.digest_of(key).hex() in text
     assert oct(keys_file.stat().st_mode & 0o777) == "0o600"
+    keys_file.chmod(0o644)  # readable by a container's user: kept when the file is rewritten
+    add(keys_file, "studio-b", "use", capsys)
+    assert oct(keys_file.stat().st_mode & 0o777) == "0o644"
+    api_keys.revoke_key(keys_file, "studio-b")
     pasted = "msk_" + "p" * 43
     keys_file.write_text(text + f"pasted {pasted}\nbad-scope {pasted} " + "0" * 64 + "\n")
     with caplog.at_level(logging.WARNING, logger="service.api_keys"):

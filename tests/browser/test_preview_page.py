@@ -2,7 +2,8 @@
 real server: it loads without console errors, lists the styles by family (translator,
 registered, fast), animates an uploaded BVH or GLB locally, plays input and result on one
 timeline (play/pause, scrubbing), runs a registered style, gives the result back in the
-input's format for download, and shows the problem detail when the POST fails.
+input's format for download, and shows the problem detail when the POST fails; where the
+service needs an API key, it asks for one and works with it.
 
 Skips with the reason when chromium or chromedriver is absent
 (``apt-get install chromium chromium-driver``; ``.ci/run`` does it).
@@ -20,6 +21,7 @@ import httpx
 import pytest
 
 from motion import bvh, gltf
+from service import api_keys
 from tests.gltf_files import character_glb
 from tests.server import REPO, ServerProcess
 
@@ -307,3 +309,51 @@ def test_a_file_that_is_neither_bvh_nor_gltf_is_reported_not_thrown(server, brow
     assert "Could not read notes.bvh as BVH or glTF" in message
     assert console_errors(browser) == []
     assert browser.execute_script("return window.motionPreview.input.loaded") is False
+
+
+@pytest.fixture(scope="module")
+def keyed_server(tmp_path_factory):
+    """A service that needs an API key, and the key of ``preview`` (scope ``use``)."""
+    folder = tmp_path_factory.mktemp("browser-keys")
+    key = api_keys.add_key(folder / "api-keys", "preview", frozenset({"use"}))
+    env = {"MOTION_LOG_LEVEL": "warning", "MOTION_API_KEYS_FILE": str(folder / "api-keys")}
+    with ServerProcess(env=env, log_path=folder / "server.log") as running:
+        yield running, key
+
+
+def test_the_page_asks_for_a_key_where_the_service_needs_one(server, keyed_server, browser):
+    from selenium.webdriver.common.by import By
+
+    open_page(server, browser)  # a service without keys: no key asked for
+    assert not browser.find_element(By.ID, "key-form").is_displayed()
+    assert browser.execute_script("return window.motionPreview.needsKey") is False
+    server, key = keyed_server
+    browser.get(server.url + "/")
+    wait_for(browser, "window.motionPreview && window.motionPreview.needsKey")
+    form = browser.find_element(By.ID, "key-form")
+    assert form.is_displayed()
+    assert "needs an API key" in browser.execute_script("return window.motionPreview.lastMessage")
+
+    def enter(text: str) -> None:
+        field = browser.find_element(By.ID, "api-key")
+        assert field.get_attribute("type") == "password"
+        field.send_keys(text)
+        browser.find_element(By.ID, "key-use").click()
+
+    enter("msk_not-a-key-of-this-service")
+    wait_for(browser, "window.motionPreview.lastMessage.includes('did not accept')")
+    assert form.is_displayed()
+    enter(key)
+    wait_for(browser, "document.querySelector('#style-name option[value=\"elderly\"]')")
+    assert not form.is_displayed()
+    assert browser.execute_script("return window.motionPreview.needsKey") is False
+
+    browser.find_element(By.ID, "content-file").send_keys(str(FIXTURE))
+    wait_for(browser, "window.motionPreview.input.loaded")
+    result = run_and_wait(browser)
+    assert result["frames"] >= 2
+    # kept for this tab only, and never in the address
+    assert browser.execute_script("return sessionStorage.getItem('motion-style-api-key')") == key
+    assert browser.execute_script("return localStorage.length") == 0
+    assert key not in browser.current_url
+    assert console_errors(browser, allow_network=True) == []  # the 401s, nothing else

@@ -342,6 +342,31 @@ def test_registered_styles_live_on_a_volume_every_replica_shares():
     assert spec["securityContext"]["fsGroup"] == spec["securityContext"]["runAsGroup"]
 
 
+def test_api_keys_are_mounted_as_a_folder_so_a_revocation_reaches_every_replica():
+    """Compose (deploy/compose.keys.yml) and Kubernetes (a Secret) mount the folder of the
+    keys file, never the file alone: ``keys revoke`` and the kubelet replace the file, which
+    a single-file mount would go on showing as it was."""
+    override = yaml.safe_load((REPO / "deploy" / "compose.keys.yml").read_text())
+    api = override["services"]["api"]
+    keys_file = Path(api["environment"]["MOTION_API_KEYS_FILE"])
+    (volume,) = api["volumes"]
+    source, target, mode = volume.split(":")
+    assert keys_file.parent == Path(target) and mode == "ro"
+    assert source == "./deploy/keys" and "deploy/keys/" in (REPO / ".gitignore").read_text()
+    Settings(api_keys_file=keys_file)
+
+    spec = k8s_objects()["Deployment"]["spec"]["template"]["spec"]
+    (container,) = spec["containers"]
+    env = {e["name"]: e["value"] for e in container["env"]}
+    keys_file = Path(env["MOTION_API_KEYS_FILE"])
+    (mount,) = [m for m in container["volumeMounts"] if m["name"] == "api-keys"]
+    assert keys_file.parent == Path(mount["mountPath"]) and "subPath" not in mount
+    assert mount["readOnly"] is True
+    (volume,) = [v for v in spec["volumes"] if v["name"] == "api-keys"]
+    assert volume["secret"]["secretName"] == "motion-style-api-keys"
+    assert volume["secret"]["defaultMode"] & 0o004 == 0  # not readable by every user
+
+
 # --- running things -----------------------------------------------------------------------------
 
 
