@@ -271,6 +271,13 @@ def log_startup(settings: Settings) -> None:
     """Say whether keys are required; warn when none are and others can reach the service."""
     if settings.api_keys_file is not None:
         logger.info("API keys required (MOTION_API_KEYS_FILE=%s)", settings.api_keys_file)
+        room = settings.workers * (settings.max_concurrent_inferences + settings.max_queued)
+        if settings.key_max_concurrent == 0 or settings.key_max_concurrent >= room:
+            logger.warning(
+                "one API key may hold every inference slot and queue place of this replica "
+                "(%d): set MOTION_KEY_MAX_CONCURRENT below it so that it cannot starve others",
+                room,
+            )
     elif not is_loopback(settings.host):
         logger.warning(
             "no API keys: anyone who reaches %s:%d can use this service and delete its "

@@ -273,6 +273,18 @@ def test_without_a_keys_file_the_service_is_open_and_warns_beyond_loopback(clien
     assert len(caplog.records) == 1 and "MOTION_API_KEYS_FILE" in caplog.records[0].message
 
 
+def test_start_up_warns_when_one_key_could_fill_the_queue(tmp_path, caplog):
+    keys_file = tmp_path / "keys"
+    keys_file.write_text("")
+    fits = Settings(api_keys_file=keys_file, max_concurrent_inferences=1, max_queued=8)
+    with caplog.at_level(logging.WARNING, logger="service.auth"):
+        log_startup(fits.model_copy(update={"key_max_concurrent": 8}))
+        assert not caplog.records
+        log_startup(fits.model_copy(update={"key_max_concurrent": 9}))
+        log_startup(fits.model_copy(update={"key_max_concurrent": 0}))
+    assert len(caplog.records) == 2 and "MOTION_KEY_MAX_CONCURRENT" in caplog.text
+
+
 def test_a_keys_file_that_cannot_be_read_stops_the_start(tmp_path):
     missing = tmp_path / "no-such-file"
     with pytest.raises(api_keys.KeysFileError, match="MOTION_API_KEYS_FILE"):
