@@ -132,7 +132,7 @@ def test_a_manage_key_registers_and_deletes_and_the_style_records_the_keys_name(
     listed = client.get("/v1/styles", headers=bearer(keys["user"])).json()["translator"]
     entry = next(s for s in listed if s["name"] == "studio-walk")
     assert entry["registered"] and entry["registered_by"] == "admin"
-    styles_dir = client.app.state.styles.folder
+    styles_dir = client.app.state.settings.styles_dir
     stored = json.loads((styles_dir / "studio-walk.json").read_text())
     assert stored["registered_by"] == "admin"
     # a use key may restyle with it; the manage key deletes it
