@@ -74,8 +74,9 @@ def device_of(choice: str) -> str:
 
 def translator_flags(stage: dict, checkpoint: Path, finished: list[str]) -> list[str]:
     """``fit`` flags that run ``stage``: from its own last checkpoint where it was under
-    way (``--resume``), else from the previous stage's weights (``--init``), else from
-    random weights."""
+    way (``--resume``: with the optimiser and random state where ``<checkpoint>.state``
+    is there, else the weights and step alone), else from the previous stage's weights
+    (``--init``), else from random weights."""
     import torch
 
     from training.translator.schedule import stage_argv
@@ -83,8 +84,7 @@ def translator_flags(stage: dict, checkpoint: Path, finished: list[str]) -> list
     flags = ["--out", str(checkpoint), "--stage", stage["name"], *stage_argv(stage)]
     if checkpoint.exists():
         payload = torch.load(checkpoint, map_location="cpu", weights_only=False)
-        state = Path(f"{checkpoint}.state")
-        if payload.get("stage") == stage["name"] and state.exists():
+        if payload.get("stage") == stage["name"] and stage["name"] not in finished:
             return [*flags, "--resume"]
         if finished:
             return [*flags, "--init", str(checkpoint)]

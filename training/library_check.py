@@ -113,12 +113,12 @@ def map_rigs(library: L.Library, report: CheckReport) -> list:
 def check_styles(rows: list[L.Row], frames: dict[str, int], report: CheckReport) -> None:
     """Per style its takes, actions and held-out takes; the pairs; the style problems."""
     usable = [r for r in rows if frames.get(r.file, 0) >= WINDOW]
-    for r in rows:
-        if r.file in frames and frames[r.file] < WINDOW:
-            report.warnings.append(
-                f"{r.file}: {frames[r.file]} frames at 30 fps, fewer than a training "
-                f"window ({WINDOW}): not used"
-            )
+    short = [r.file for r in rows if r.file in frames and frames[r.file] < WINDOW]
+    if short:
+        report.warnings.append(
+            f"{len(short)} clip(s) shorter than a training window ({WINDOW} frames at 30 "
+            f"fps), not used: {_files(short, 5)}"
+        )
     styles_of: dict[str, set[str]] = defaultdict(set)
     for r in usable:
         if not r.held_out:

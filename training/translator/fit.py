@@ -15,8 +15,9 @@ style's mean code stands for it), and the 2D codes regressed on the 3D ones.
 
 The schedule of the shipped model is ``training/translator/schedule.json``
 (``make train-translator`` replays it). Checkpoints hold the weights, the network and
-training configuration and the feature statistics; ``--resume`` also needs the
-optimiser state, kept in ``<out>.state`` and never committed.
+training configuration and the feature statistics; ``--resume`` continues with the
+optimiser and random state kept in ``<out>.state`` (never committed; without it, from the
+weights and step with a fresh optimiser).
 
 The library (``training.library``: a folder of clips and ``labels.csv``) is Bandai's
 (``training.bandai_library``, written under ``cache/`` on first use) unless ``--library``
@@ -461,8 +462,8 @@ def main(argv: list[str] | None = None) -> int:
     trainer.rng = trainer.val_pairs.rng = np.random.default_rng(12345)
     val = [trainer.batch(trainer.val_pairs) for _ in range(8 if trainer.val_pairs.drawable else 0)]
     trainer.rng, trainer.val_pairs.rng = saved
-    if args.resume:
-        trainer.load(args.out, optimiser=True)
+    if args.resume:  # a weights-only copy (committed) continues with a fresh optimiser
+        trainer.load(args.out, optimiser=Path(f"{args.out}.state").exists())
     elif args.init:
         trainer.load(args.init, optimiser=False)
         trainer.step = 0
