@@ -282,6 +282,12 @@ def test_a_stopped_stage_resumes_to_the_weights_of_an_uninterrupted_one(
     assert first["step"] == 1 and first["stages"] == [] and first["stage"] == "paired"
     flags = TL.translator_flags(stage, parted, [])
     assert "--resume" in flags
+    # a weights-only copy (as committed, no .state) continues from its weights and step
+    alone = tmp_path / "alone.pt"
+    alone.write_bytes(parted.read_bytes())
+    fit.main(TL.translator_flags(stage, alone, []) + common)
+    continued = torch.load(alone, weights_only=False)
+    assert continued["step"] == 3 and continued["stages"] == ["paired"]
     fit.main(flags + common)
     a = torch.load(whole, weights_only=False)
     b = torch.load(parted, weights_only=False)
