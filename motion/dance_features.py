@@ -448,12 +448,12 @@ hover, its floor rising with it."""
 
 def clean_feet(motion: Motion) -> Motion:
     """The dance's foot clean-up: contacts (:func:`dance_contacts`) pinned by leg IK
-    (``ik.pin_canonical_feet``), then feet gliding along the floor lifted
+    (``grounding.pin_canonical_feet``), then feet gliding along the floor lifted
     (:func:`lift_gliding_feet`)."""
-    from motion import ik
+    from motion import grounding
 
     contacts = dance_contacts(K.global_positions(motion), motion.fps)
-    return lift_gliding_feet(ik.pin_canonical_feet(motion, contacts))
+    return lift_gliding_feet(grounding.pin_canonical_feet(motion, contacts))
 
 
 def lift_gliding_feet(motion: Motion) -> Motion:
@@ -468,7 +468,7 @@ def lift_gliding_feet(motion: Motion) -> Motion:
     foot keeps its global rotation (so the toes rise with it)."""
     from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
-    from motion import ik
+    from motion import grounding, ik
 
     parents = motion.skeleton.parents
     grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
@@ -476,7 +476,7 @@ def lift_gliding_feet(motion: Motion) -> Motion:
     levels = dict(zip(FOOT_JOINTS, CT.ground_heights(gpos, FOOT_JOINTS, LEG), strict=True))
     slow, fast = (s * LEG for s in GLIDE_SPEEDS)
     smooth = max(GLIDE_SMOOTH_SECONDS * motion.fps, 1e-3)
-    for hip, knee, ankle, toe in ik.CANONICAL_LEGS:
+    for hip, knee, ankle, toe in grounding.CANONICAL_LEGS:
         speed = np.maximum(CT.horizontal_speed(gpos[:, ankle], motion.fps),
                            CT.horizontal_speed(gpos[:, toe], motion.fps))  # fmt: skip
         ramp = np.clip((speed - slow) / (fast - slow), 0.0, 1.0)

@@ -395,7 +395,7 @@ def turn_leg(
 
 @numba.njit(cache=CACHE, nogil=True)
 def lift_toes(lrot, grot, gpos, frames, lift, parent, ankle, toe):  # pragma: no cover
-    """``motion.ik.lift_toes``'s turn of one ankle at ``frames``, each raising its toe by
+    """``motion.grounding.lift_toes``'s turn of one ankle at ``frames``, each raising its toe by
     ``lift (F,)`` about the ankle (the foot's length kept, at most 0.999 of it up or down),
     ``lrot`` in place; ``grot``, ``gpos`` the motion's forward kinematics."""
     quaternion = np.empty((1, 4))

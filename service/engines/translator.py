@@ -19,9 +19,9 @@ mocap); at a ``strength`` below 1, each joint's rotation
 goes that part of the way from the content's own to the restyled one (0 gives the content
 back); the content's root trajectory
 (``features.decode_motion``); the feet planted where the CONTENT's are held on the
-content's floor (the knees bend to reach it down to ``ik.KNEE_ABSORB`` of a leg, the hips
-move for the rest), and the feet the content has in the air kept clear of the floor
-(``ik.pin_canonical_feet``);
+content's floor (the knees bend to reach it down to ``grounding.KNEE_ABSORB`` of a leg,
+the hips move for the rest), and the feet the content has in the air kept clear of the floor
+(``grounding.pin_canonical_feet``);
 then the time warp, to the power ``strength`` and clamped to [``MIN_WARP``, ``MAX_WARP``]:
 for a style clip the ratio of velocity factors (style over content, aberman2020); for a
 named style or mix the style's speed against the other styles on the same action
@@ -42,7 +42,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from motion import contacts as CT
 from motion import features as Fe
-from motion import ik, kernels
+from motion import grounding, kernels
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from motion.styles import exaggerated
@@ -122,7 +122,9 @@ def restyled_motion(
         with timer.stage("foot_cleanup"):
             feet = enc.gpos  # the features' FK: contacts and floor read the content posed once
             contacts = CT.canonical_foot_contacts(content, positions=feet)
-            motion = ik.pin_canonical_feet(motion, contacts, floor_of=content, floor_positions=feet)
+            motion = grounding.pin_canonical_feet(
+                motion, contacts, floor_of=content, floor_positions=feet
+            )
     return motion
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motion import bvh, fit, ik, retarget
+from motion import bvh, fit, grounding, ik, retarget
 from motion import canonical as C
 from motion import contacts as CT
 from motion import kinematics as K
@@ -251,7 +251,7 @@ def _check_pinned(before: Motion, after: Motion, legs) -> None:
 def test_pin_feet_reduces_skating_on_a_real_walk(walk):
     contacts = CT.canonical_foot_contacts(walk)
     lrot_before = walk.lrot.copy()
-    pinned = ik.pin_canonical_feet(walk, contacts, hold_flat_feet=False)
+    pinned = grounding.pin_canonical_feet(walk, contacts, hold_flat_feet=False)
     np.testing.assert_array_equal(walk.lrot, lrot_before)  # input left alone
     before = CT.canonical_foot_skating(walk, contacts)
     after = CT.canonical_foot_skating(pinned, contacts)
@@ -261,19 +261,19 @@ def test_pin_feet_reduces_skating_on_a_real_walk(walk):
     ankles = [C.INDEX["Foot_L"], C.INDEX["Foot_R"]]
     ankle_only = contacts[:, [0, 2]] & ~contacts[:, [1, 3]]
     assert CT.foot_skating(gpos, ankle_only, walk.fps, ankles) < 0.05
-    _check_pinned(walk, pinned, ik.CANONICAL_LEGS)
+    _check_pinned(walk, pinned, grounding.CANONICAL_LEGS)
     assert _knee_bend_degrees(pinned).min() > -1.0  # the knee never bends backwards
 
 
 def test_pin_feet_removes_hip_sway_skating(walk):
     contacts = CT.canonical_foot_contacts(walk)  # labels of the clean clip
     swayed = _swayed(walk)
-    pinned = ik.pin_canonical_feet(swayed, contacts, hold_flat_feet=False)
+    pinned = grounding.pin_canonical_feet(swayed, contacts, hold_flat_feet=False)
     before = CT.canonical_foot_skating(swayed, contacts)
     after = CT.canonical_foot_skating(pinned, contacts)
     assert before > 3.0 * CT.canonical_foot_skating(walk, contacts)
     assert after < 0.15 * before
-    _check_pinned(swayed, pinned, ik.CANONICAL_LEGS)
+    _check_pinned(swayed, pinned, grounding.CANONICAL_LEGS)
     bend_before = _knee_bend_degrees(swayed)
     bend_after = _knee_bend_degrees(pinned)
     assert bend_after.min() > -1.0
@@ -298,8 +298,8 @@ def _wobbly_feet(motion: Motion) -> Motion:
 def test_flat_feet_are_held_in_one_orientation(walk):
     contacts = CT.canonical_foot_contacts(walk)
     wobbly = _wobbly_feet(walk)
-    held = ik.pin_canonical_feet(wobbly, contacts)
-    kept = ik.pin_canonical_feet(wobbly, contacts, hold_flat_feet=False)
+    held = grounding.pin_canonical_feet(wobbly, contacts)
+    kept = grounding.pin_canonical_feet(wobbly, contacts, hold_flat_feet=False)
     flat = contacts[:, [0, 2]] & contacts[:, [1, 3]]
     feet = [C.INDEX[n] for n in ("Foot_L", "Foot_R")]
     toes = [C.INDEX[n] for n in ("Toes_L", "Toes_R")]
@@ -358,20 +358,20 @@ def test_pin_feet_bends_straight_legs_forward():
     dip = np.where(np.abs(t - 50) < 3, 10.0 * np.cos((t - 50) / 3 * np.pi / 2) ** 2, 0.0)
     lpos[:, 1, 1] -= dip
     standing = Motion(C.SKELETON, C.FPS, lrot, lpos)
-    pinned = ik.pin_canonical_feet(standing, np.ones((frames, 4), dtype=bool))
+    pinned = grounding.pin_canonical_feet(standing, np.ones((frames, 4), dtype=bool))
     bend = _knee_bend_degrees(pinned)
     assert bend.min() > -1e-6 and bend[50].min() > 30.0
     ankles = K.global_positions(pinned)[:, [C.INDEX["Foot_L"], C.INDEX["Foot_R"]]]
     assert np.ptp(ankles, axis=0).max() < 0.5  # cm
-    _check_pinned(standing, pinned, ik.CANONICAL_LEGS)
+    _check_pinned(standing, pinned, grounding.CANONICAL_LEGS)
 
 
 def test_pin_feet_without_contacts_changes_nothing(walk):
     none = np.zeros((walk.num_frames, 4), dtype=bool)
-    out = ik.pin_canonical_feet(walk, none)
+    out = grounding.pin_canonical_feet(walk, none)
     np.testing.assert_array_equal(out.lrot, walk.lrot)
     with pytest.raises(MotionError):
-        ik.pin_canonical_feet(walk, none[:, :3])
+        grounding.pin_canonical_feet(walk, none[:, :3])
 
 
 @pytest.fixture(scope="module")
@@ -397,9 +397,9 @@ def test_ground_hips_puts_planted_feet_back_on_the_floor(fixture_walk, by):
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
     hips = C.INDEX["Hips"]
     moved = _hips_raised(fixture_walk, by)
-    grounded = ik.ground_hips(moved, contacts, levels, hips)
+    grounded = grounding.ground_hips(moved, contacts, levels, hips)
     # the error is removed whole: the same result as from the clip itself...
-    settled = ik.ground_hips(fixture_walk, contacts, levels, hips)
+    settled = grounding.ground_hips(fixture_walk, contacts, levels, hips)
     np.testing.assert_allclose(grounded.lpos, settled.lpos, atol=1e-6)
     np.testing.assert_array_equal(grounded.lrot, moved.lrot)  # only the hips' height moves
     # ...which stands where it stood, to within the heights its planted feet vary by
@@ -412,17 +412,17 @@ def test_ground_hips_follows_a_slow_crouch(fixture_walk):
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
     hips = C.INDEX["Hips"]
     crouch = np.linspace(0.0, -15.0, fixture_walk.num_frames)  # legs 15 cm too long by the end
-    grounded = ik.ground_hips(_hips_raised(fixture_walk, crouch), contacts, levels, hips)
-    settled = ik.ground_hips(fixture_walk, contacts, levels, hips)
+    grounded = grounding.ground_hips(_hips_raised(fixture_walk, crouch), contacts, levels, hips)
+    settled = grounding.ground_hips(fixture_walk, contacts, levels, hips)
     error = np.abs(grounded.lpos[:, hips, 1] - settled.lpos[:, hips, 1])
     middle = slice(len(error) // 4, -len(error) // 4)
     assert error[middle].max() < 0.75 and error.max() < 2.5  # cm, against 15 uncorrected
     none = np.zeros_like(contacts)
     np.testing.assert_array_equal(
-        ik.ground_hips(fixture_walk, none, levels, hips).lpos, fixture_walk.lpos
+        grounding.ground_hips(fixture_walk, none, levels, hips).lpos, fixture_walk.lpos
     )
     with pytest.raises(MotionError, match="contacts must be"):
-        ik.ground_hips(fixture_walk, contacts[:, :3], levels, hips)
+        grounding.ground_hips(fixture_walk, contacts[:, :3], levels, hips)
 
 
 def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
@@ -430,8 +430,8 @@ def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
     the content's floor they stand on it again, and still hold still."""
     contacts = CT.canonical_foot_contacts(fixture_walk)
     sunk = _hips_raised(fixture_walk, -10.0)
-    own = ik.pin_canonical_feet(sunk, contacts)
-    grounded = ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk)
+    own = grounding.pin_canonical_feet(sunk, contacts)
+    grounded = grounding.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk)
     assert (_foot_levels(own) - _foot_levels(fixture_walk)).mean() < -8.0
     np.testing.assert_allclose(_foot_levels(grounded), _foot_levels(fixture_walk), atol=1.0)
     assert (
@@ -439,7 +439,7 @@ def test_feet_pinned_on_the_floor_of_another_clip(fixture_walk):
         <= CT.canonical_foot_skating(own, contacts) + 0.1
     )
     with pytest.raises(MotionError, match="frames"):
-        ik.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
+        grounding.pin_canonical_feet(sunk, contacts, floor_of=fixture_walk.slice(1))
 
 
 def _dip(motion: Motion, depth: float) -> np.ndarray:
@@ -459,9 +459,11 @@ def test_ground_hips_moves_a_whole_clip_onto_the_floor(fixture_walk, by):
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
     hips = C.INDEX["Hips"]
     moved = _hips_raised(fixture_walk, -by)
-    kept = ik.ground_hips(moved, contacts, levels, hips, absorb=6.0)
+    kept = grounding.ground_hips(moved, contacts, levels, hips, absorb=6.0)
     np.testing.assert_allclose(  # as from the clip itself
-        kept.lpos, ik.ground_hips(fixture_walk, contacts, levels, hips, absorb=6.0).lpos, atol=1e-6
+        kept.lpos,
+        grounding.ground_hips(fixture_walk, contacts, levels, hips, absorb=6.0).lpos,
+        atol=1e-6,
     )
 
 
@@ -472,8 +474,10 @@ def test_ground_hips_leaves_a_passing_sink_to_the_knees(fixture_walk, by):
     hips, absorb = C.INDEX["Hips"], 6.0
     dip = _dip(fixture_walk, by)
     sunk = _hips_raised(fixture_walk, -dip)
-    whole = ik.ground_hips(sunk, contacts, levels, hips).lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
-    kept = ik.ground_hips(sunk, contacts, levels, hips, absorb=absorb)
+    whole = (
+        grounding.ground_hips(sunk, contacts, levels, hips).lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
+    )
+    kept = grounding.ground_hips(sunk, contacts, levels, hips, absorb=absorb)
     raised = kept.lpos[:, hips, 1] - sunk.lpos[:, hips, 1]
     knees = whole - raised  # what is left to the knees
     assert knees.min() > -1e-9 and knees.max() < absorb + 1e-9
@@ -490,9 +494,11 @@ def test_sunk_feet_reach_the_contents_floor_with_bent_knees(fixture_walk):
     planted feet come up onto the content's floor by leg IK, the knees bending more."""
     contacts = CT.canonical_foot_contacts(fixture_walk)
     knee = C.INDEX["LowerLeg_L"]
-    low = _hips_raised(fixture_walk, -_dip(fixture_walk, 0.5 * ik.KNEE_ABSORB * C.leg_length()))
-    out = ik.pin_canonical_feet(low, contacts, floor_of=fixture_walk)
-    own = ik.pin_canonical_feet(fixture_walk, contacts, floor_of=fixture_walk)
+    low = _hips_raised(
+        fixture_walk, -_dip(fixture_walk, 0.5 * grounding.KNEE_ABSORB * C.leg_length())
+    )
+    out = grounding.pin_canonical_feet(low, contacts, floor_of=fixture_walk)
+    own = grounding.pin_canonical_feet(fixture_walk, contacts, floor_of=fixture_walk)
     hips = C.INDEX["Hips"]
     # in the dip the hips stay lower than the content's cleaned up alike
     middle = fixture_walk.num_frames // 2
@@ -519,12 +525,12 @@ def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
     contacts = CT.canonical_foot_contacts(fixture_walk)
     toes = contacts[:, [1, 3]]
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk) + 6.0, strict=True))
-    lifted = ik.lift_toes(fixture_walk, levels, toes, ik.CANONICAL_LEGS)
+    lifted = grounding.lift_toes(fixture_walk, levels, toes, grounding.CANONICAL_LEGS)
     before, after = K.global_positions(fixture_walk), K.global_positions(lifted)
     toe_joints = [C.INDEX["Toes_L"], C.INDEX["Toes_R"]]
     others = [j for j in range(len(C.JOINTS)) if j not in toe_joints]
     np.testing.assert_allclose(after[:, others], before[:, others], atol=1e-6)  # ankles too
-    for i, (_, _, ankle, toe) in enumerate(ik.CANONICAL_LEGS):
+    for i, (_, _, ankle, toe) in enumerate(grounding.CANONICAL_LEGS):
         np.testing.assert_allclose(  # the foot keeps its length
             np.linalg.norm(after[:, toe] - after[:, ankle], axis=-1),
             np.linalg.norm(before[:, toe] - before[:, ankle], axis=-1),
@@ -536,10 +542,10 @@ def test_a_toe_dipping_in_the_air_is_lifted_onto_the_floor(fixture_walk):
         assert dip.sum() > 20.0  # cm over the clip: the case is real
         assert left.sum() < 0.05 * dip.sum()  # smoothed, so the edges of a dip keep a little
     nothing = {j: level - 50.0 for j, level in levels.items()}
-    same = ik.lift_toes(fixture_walk, nothing, toes, ik.CANONICAL_LEGS)
+    same = grounding.lift_toes(fixture_walk, nothing, toes, grounding.CANONICAL_LEGS)
     np.testing.assert_array_equal(same.lrot, fixture_walk.lrot)
     with pytest.raises(MotionError, match="toe contacts"):
-        ik.lift_toes(fixture_walk, levels, toes[1:], ik.CANONICAL_LEGS)
+        grounding.lift_toes(fixture_walk, levels, toes[1:], grounding.CANONICAL_LEGS)
 
 
 def test_a_swinging_foot_skimming_the_floor_is_raised_to_the_contents_clearance(fixture_walk):
@@ -550,12 +556,12 @@ def test_a_swinging_foot_skimming_the_floor_is_raised_to_the_contents_clearance(
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
     walk = K.global_positions(fixture_walk)
     feet = CT.CANONICAL_FOOT_JOINTS
-    cap = ik.SWING_CLEARANCE * C.leg_length()
+    cap = grounding.SWING_CLEARANCE * C.leg_length()
     clearance = np.minimum(walk[:, feet, 1] - _foot_levels(fixture_walk)[None], cap)
     low = _hips_raised(fixture_walk, -5.0)
-    raised = ik.lift_swing_feet(low, levels, contacts, clearance[:, [0, 2]])
+    raised = grounding.lift_swing_feet(low, levels, contacts, clearance[:, [0, 2]])
     before, after = K.global_positions(low), K.global_positions(raised)
-    for i, (_, _, ankle, _) in enumerate(ik.CANONICAL_LEGS):
+    for i, (_, _, ankle, _) in enumerate(grounding.CANONICAL_LEGS):
         planted = contacts[:, 2 * i] | contacts[:, 2 * i + 1]
         np.testing.assert_allclose(after[planted, ankle], before[planted, ankle], atol=1e-6)
         want = levels[ankle] + clearance[:, i]
@@ -568,7 +574,7 @@ def test_a_swinging_foot_skimming_the_floor_is_raised_to_the_contents_clearance(
             after[:, ankle][:, [0, 2]], before[:, ankle][:, [0, 2]], atol=0.5
         )
     with pytest.raises(MotionError, match="clearance"):
-        ik.lift_swing_feet(low, levels, contacts, clearance[1:, [0, 2]])
+        grounding.lift_swing_feet(low, levels, contacts, clearance[1:, [0, 2]])
 
 
 # --------------------------------------------------------------------------- fit_positions
@@ -635,7 +641,7 @@ def test_fit_positions_on_a_skeleton_with_zero_length_bones(cmu_walk):
 def test_pins_without_hold_height_lift_sunk_contacts_and_never_press_floating_ones(fixture_walk):
     contacts = CT.canonical_foot_contacts(fixture_walk)
     levels = dict(zip(CT.CANONICAL_FOOT_JOINTS, _foot_levels(fixture_walk), strict=True))
-    legs, planted = ik.CANONICAL_LEGS, contacts[:, [0, 2]]
+    legs, planted = grounding.CANONICAL_LEGS, contacts[:, [0, 2]]
     ankles = [C.INDEX["Foot_L"], C.INDEX["Foot_R"]]
 
     def ankle_heights(m):
