@@ -103,21 +103,27 @@ def required_scope(scope: Scope) -> str:
     if table is None:
         table = app.state.route_scopes = _route_scopes(app)
     path, method = scope.get("path", ""), scope.get("method", "").lower()
-    for regex, scopes in table:
+    for regex, scopes, otherwise in table:
         if regex.match(path):
-            return scopes.get(method, "use")
+            return scopes.get(method, otherwise)
     return "use"
 
 
-def _route_scopes(app: FastAPI) -> list[tuple[re.Pattern, dict[str, str]]]:
-    """``(path regex, {method: scope})`` for every documented path, fixed paths first (so
-    ``/v1/styles`` is not taken for ``/v1/{anything}``)."""
+def _route_scopes(app: FastAPI) -> list[tuple[re.Pattern, dict[str, str], str]]:
+    """``(path regex, {method: scope}, scope of other methods)`` for every documented path,
+    fixed paths before templated ones. A schema that cannot be built makes every route
+    need ``manage``: refusing is safer than letting a ``use`` key by."""
     out = []
-    for template, item in app.openapi().get("paths", {}).items():
+    try:
+        paths = app.openapi().get("paths", {})
+    except Exception:
+        logger.exception("cannot read the routes' scopes: every route needs 'manage'")
+        return [(re.compile(""), {}, "manage")]
+    for template, item in paths.items():
         scopes = {m: op.get(SCOPE_EXTENSION, "use") for m, op in item.items()}
         out.append((compile_path(template)[0], scopes, "{" in template))
     out.sort(key=lambda row: row[2])
-    return [(regex, scopes) for regex, scopes, _ in out]
+    return [(regex, scopes, "use") for regex, scopes, _ in out]
 
 
 class ApiKeyMiddleware:

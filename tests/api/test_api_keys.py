@@ -246,6 +246,24 @@ def test_requests_in_progress_are_limited_per_key_across_processes(tmp_path):
     assert first.acquire("a") is not None and second.acquire("a") is not None
 
 
+def test_routes_whose_scope_cannot_be_read_need_manage(make_client, tmp_path, caplog):
+    keys_file = tmp_path / "keys"
+    user = api_keys.add_key(keys_file, "user", frozenset({"use"}))
+    admin = api_keys.add_key(keys_file, "admin", frozenset({"use", "manage"}))
+
+    def broken_schema(app):
+        def openapi():
+            raise RuntimeError("no schema")
+
+        app.openapi = openapi
+
+    client = make_client(Settings(api_keys_file=keys_file), setup=broken_schema, wait=False)
+    with caplog.at_level(logging.ERROR, logger="service.auth"):
+        assert_problem(client.get("/v1/nowhere", headers=bearer(user)), 403, "forbidden")
+    assert "every route needs 'manage'" in caplog.text
+    assert client.get("/v1/nowhere", headers=bearer(admin)).status_code == 404
+
+
 def test_openapi_names_the_key_schemes_and_each_routes_scope(keyed):
     client, keys, _ = keyed
     schema = client.get("/openapi.json").json()
