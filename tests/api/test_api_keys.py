@@ -246,6 +246,31 @@ def test_requests_in_progress_are_limited_per_key_across_processes(tmp_path):
     assert first.acquire("a") is not None and second.acquire("a") is not None
 
 
+def test_an_error_trace_holds_no_key(make_client, tmp_path, caplog):
+    """A route that fails with a key in hand: the 500 problem and the logged traceback
+    (the formatted exception, as the JSON log writes it) hold the key's name, not the key."""
+    keys_file = tmp_path / "keys"
+    key = api_keys.add_key(keys_file, "tracer", frozenset({"use"}))
+
+    def failing_route(app):
+        @app.get("/v1/_test/boom")
+        async def boom():
+            raise RuntimeError("boom")
+
+    client = make_client(
+        Settings(api_keys_file=keys_file), setup=failing_route, wait=False,
+        raise_server_exceptions=False,
+    )  # fmt: skip
+    with caplog.at_level(logging.DEBUG):
+        r = client.get("/v1/_test/boom", headers={"X-API-Key": key})
+    assert_problem(r, 500, "internal-error")
+    logged = caplog.text + "".join(
+        logging.Formatter().formatException(rec.exc_info) for rec in caplog.records if rec.exc_info
+    )
+    assert "RuntimeError: boom" in logged and "tracer" in logged
+    assert key not in logged + r.text and key[4:16] not in logged + r.text
+
+
 def test_routes_whose_scope_cannot_be_read_need_manage(make_client, tmp_path, caplog):
     keys_file = tmp_path / "keys"
     user = api_keys.add_key(keys_file, "user", frozenset({"use"}))
