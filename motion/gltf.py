@@ -14,25 +14,15 @@ glTF has no End Sites: a leaf joint ends at its node.
 Writing keeps every node, mesh, skin, material and other animation of the file: the
 animation that was read gets new samplers and channels (rotation of every rig joint,
 translation where it moves), in the accessors and buffer views the old ones used alone,
-so a file restyled twice does not grow. Scale and morph-weight channels of that
-animation are not carried. pygltflib reads and writes the container; accessors are
-unpacked and packed here (it leaves that out). Every problem raises
+so a file restyled twice does not grow (:mod:`motion.gltf_writer`). Scale and
+morph-weight channels of that animation are not carried. pygltflib reads and writes the
+container (:mod:`motion.gltf_container` unpacks its accessors). Every problem raises
 :class:`~motion.errors.MotionError` naming it.
-
-Over 600 lines in one module: writing reuses what reading found (the document's
-accessors and buffer views, the rig in the node tree, its world-aligned frames), so the
-two live beside the private helpers they share.
 """
 
 from __future__ import annotations
 
-import base64
-import binascii
-import json
 import os
-import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,24 +30,19 @@ import numpy as np
 from motion import rotations as rot
 from motion.bvh import MAX_ABS_VALUE
 from motion.errors import MotionError
+from motion.gltf_container import GltfDocument, malformed_as_motion_error
+from motion.gltf_writer import AnimationWriter
 from motion.skeleton import Motion, Skeleton
 
 DEFAULT_FPS = 30.0
 MAX_FRAMES = 200_000  # a bound before allocation; callers pass their own, smaller limit
 _COMMON_FPS = (24.0, 25.0, 30.0, 48.0, 50.0, 60.0, 90.0, 100.0, 120.0, 240.0)
-_MAX_VALUES = 50_000_000  # elements of one accessor: far beyond any real clip
+
+
 _ROTATION_ORDER = ("Zrotation", "Yrotation", "Xrotation")
 _POSITION = ("Xposition", "Yposition", "Zposition")
-_FLOAT = 5126
-_COMPONENTS = {  # componentType -> (numpy dtype, divisor when normalized)
-    5120: (np.dtype("i1"), 127.0),
-    5121: (np.dtype("u1"), 255.0),
-    5122: (np.dtype("<i2"), 32767.0),
-    5123: (np.dtype("<u2"), 65535.0),
-    5125: (np.dtype("<u4"), None),
-    _FLOAT: (np.dtype("<f4"), None),
-}
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
 _PATHS = ("translation", "rotation")
 
 
@@ -92,7 +77,7 @@ class GltfFile:
     :meth:`write`, which puts a new motion into it (as :func:`dumps`) without parsing the
     file again (pygltflib's parsing is the slow part)."""
 
-    def __init__(self, doc: _Document, motion: Motion) -> None:
+    def __init__(self, doc: GltfDocument, motion: Motion) -> None:
         self._doc = doc
         self.motion = motion
 
@@ -100,7 +85,7 @@ class GltfFile:
         """GLB bytes of this file with ``motion`` in place of its animation."""
         import copy
 
-        with _malformed_as_motion_error():
+        with malformed_as_motion_error():
             doc = copy.copy(self._doc)
             doc.gltf = copy.deepcopy(self._doc.gltf)  # the writer edits the document
             doc.gltf.set_binary_blob(self._doc.gltf.binary_blob())
@@ -111,12 +96,12 @@ def read(
     data: bytes, *, max_frames: int | None = None, rest_if_unanimated: bool = False
 ) -> GltfFile:
     """Parse glTF ``data`` once: its motion (options as for :func:`loads`) and a writer."""
-    with _malformed_as_motion_error():
-        doc = _Document(data)
+    with malformed_as_motion_error():
+        doc = GltfDocument(data)
         return GltfFile(doc, _read(doc, max_frames or MAX_FRAMES, rest_if_unanimated))
 
 
-def _read(doc: _Document, max_frames: int, rest_if_unanimated: bool) -> Motion:
+def _read(doc: GltfDocument, max_frames: int, rest_if_unanimated: bool) -> Motion:
     rig = _find_rig(doc)
     if rig.animation is None:
         if not rest_if_unanimated:
@@ -160,11 +145,11 @@ def dumps(original: bytes, motion: Motion) -> bytes:
     order); its frames are written at ``motion.fps`` from the old animation's start time.
     Everything else in the file is kept. A file with no animation gets a new one.
     """
-    with _malformed_as_motion_error():
-        return _write(_Document(original), motion)
+    with malformed_as_motion_error():
+        return _write(GltfDocument(original), motion)
 
 
-def _write(doc: _Document, motion: Motion) -> bytes:
+def _write(doc: GltfDocument, motion: Motion) -> bytes:
     rig = _find_rig(doc)
     names = tuple(motion.skeleton.names)
     if names != rig.names:
@@ -190,149 +175,7 @@ def _write(doc: _Document, motion: Motion) -> bytes:
         moves = np.abs(lpos[:, j] - rest[:, j]).max() > 1e-6 * max(rig.height, 1e-6)
         if j == 0 or moves or (j, "translation") in old_channels:
             outputs.append((node, "translation", lpos[:, j]))
-    return _Writer(doc, rig.animation).write(times, outputs)
-
-
-@contextmanager
-def _malformed_as_motion_error() -> Iterator[None]:
-    """pygltflib fills its objects from JSON unchecked: a member of the wrong type (a node
-    where a list belongs, a string where a number does) surfaces as a Python error deep in
-    the reading. Each is a malformed file, reported as such."""
-    try:
-        yield
-    except MotionError:
-        raise
-    except (AttributeError, TypeError, KeyError, IndexError, ValueError, OverflowError) as exc:
-        raise MotionError(f"the glTF file is malformed: {_reason(exc)}") from None
-
-
-# --- reading the container ---------------------------------------------------------------
-
-
-class _Document:
-    """A parsed glTF document and its buffers' bytes (embedded only: never a file path)."""
-
-    def __init__(self, data: bytes) -> None:
-        from pygltflib import GLTF2
-
-        if not isinstance(data, bytes | bytearray | memoryview):
-            raise MotionError("a glTF file must be given as bytes")
-        data = bytes(data)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                if data[:4] == b"glTF":
-                    gltf = GLTF2.load_from_bytes(data)
-                    if gltf is None:
-                        raise ValueError("no JSON chunk")
-                else:
-                    gltf = GLTF2.gltf_from_json(data.decode("utf-8-sig"))
-        except MotionError:
-            raise
-        except Exception as exc:  # pygltflib raises whatever its parsers raise
-            raise MotionError(f"not a readable glTF file: {_reason(exc)}") from None
-        version = str(getattr(gltf.asset, "version", "") or "")
-        if not version.startswith("2."):
-            raise MotionError(f"glTF version {version or '(none)'} is not supported; 2.0 is")
-        self.gltf = gltf
-        self.buffers: list[bytes] = []
-        for i, buffer in enumerate(gltf.buffers or []):
-            self.buffers.append(self._buffer_bytes(i, buffer))
-
-    def _buffer_bytes(self, i: int, buffer) -> bytes:
-        uri = buffer.uri
-        if uri is None:
-            blob = self.gltf.binary_blob()
-            if i != 0 or blob is None:
-                raise MotionError(f"buffer {i} has no data: the GLB has no binary chunk for it")
-            data = bytes(blob)
-        elif uri.startswith("data:"):
-            header, _, payload = uri.partition(",")
-            if not header.endswith(";base64"):
-                raise MotionError(f"buffer {i}: only base64 data URIs are supported")
-            try:
-                data = base64.b64decode(payload, validate=False)
-            except (binascii.Error, ValueError):
-                raise MotionError(f"buffer {i}: its data URI is not valid base64") from None
-        else:
-            raise MotionError(
-                f"buffer {i} refers to an external file ({uri[:60]!r}): send a .glb, or a "
-                ".gltf with its buffers embedded"
-            )
-        length = buffer.byteLength or 0
-        if len(data) < length:
-            raise MotionError(f"buffer {i} holds {len(data)} bytes, its byteLength says {length}")
-        return data
-
-    def item(self, kind: str, index, what: str):
-        items = getattr(self.gltf, kind) or []
-        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(items):
-            raise MotionError(f"{what} refers to {kind[:-1]} {index!r}, which does not exist")
-        return items[index]
-
-    def accessor(self, index: int, what: str) -> np.ndarray:
-        """An accessor's elements as float64 ``(count, width)`` (normalized ints scaled)."""
-        acc = self.item("accessors", index, what)
-        width = _WIDTHS.get(acc.type)
-        if width is None:
-            raise MotionError(f"{what}: accessor {index} is {acc.type!r}, not a scalar or vector")
-        if acc.componentType not in _COMPONENTS:
-            raise MotionError(f"{what}: accessor {index} has component type {acc.componentType}")
-        dtype, norm = _COMPONENTS[acc.componentType]
-        count = acc.count
-        if not isinstance(count, int) or count < 1 or count * width > _MAX_VALUES:
-            raise MotionError(f"{what}: accessor {index} has an unusable count {count!r}")
-        if acc.bufferView is None:
-            out = np.zeros((count, width), dtype=np.float64)
-        else:
-            raw = self._view_elements(
-                acc.bufferView, acc.byteOffset or 0, count, width, dtype, what
-            )
-            out = raw.astype(np.float64)
-        if acc.sparse is not None:
-            sp = acc.sparse
-            n = sp.count
-            if not isinstance(n, int) or not 1 <= n <= count:
-                raise MotionError(f"{what}: accessor {index} has a sparse count {n!r}")
-            itype = _COMPONENTS.get(sp.indices.componentType, (None,))[0]
-            if itype is None or itype.kind != "u":
-                raise MotionError(f"{what}: accessor {index} has sparse indices that are not ints")
-            idx = self._view_elements(
-                sp.indices.bufferView, sp.indices.byteOffset or 0, n, 1, itype, what
-            )[:, 0].astype(np.int64)
-            if idx.max() >= count:
-                raise MotionError(f"{what}: accessor {index} has a sparse index past its end")
-            vals = self._view_elements(
-                sp.values.bufferView, sp.values.byteOffset or 0, n, width, dtype, what
-            )
-            out[idx] = vals
-        if norm is not None and acc.normalized:
-            out = np.maximum(out / norm, -1.0)
-        if not np.isfinite(out).all():
-            raise MotionError(f"{what}: accessor {index} holds values that are not finite")
-        return out
-
-    def _view_elements(self, view_index, offset, count, width, dtype, what) -> np.ndarray:
-        view = self.item("bufferViews", view_index, what)
-        self.item("buffers", view.buffer, f"buffer view {view_index}")
-        buffer = self.buffers[view.buffer]
-        size = dtype.itemsize * width
-        stride = view.byteStride or size
-        start = (view.byteOffset or 0) + offset
-        end = start + stride * (count - 1) + size
-        view_end = (view.byteOffset or 0) + (view.byteLength or 0)
-        if offset < 0 or stride < size or end > view_end or view_end > len(buffer):
-            raise MotionError(f"{what}: its data runs past buffer view {view_index}")
-        arr = np.ndarray((count, width), dtype, buffer, start, (stride, dtype.itemsize))
-        return arr.copy()
-
-
-def _reason(exc: Exception) -> str:
-    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return text[:200]
-
-
-# --- the rig -----------------------------------------------------------------------------
+    return AnimationWriter(doc, rig.animation).write(times, outputs)
 
 
 @dataclass
@@ -385,7 +228,7 @@ def _uniform(scale: np.ndarray, what: str) -> float:
     return s
 
 
-def _find_rig(doc: _Document) -> _Rig:
+def _find_rig(doc: GltfDocument) -> _Rig:
     gltf = doc.gltf
     nodes = gltf.nodes or []
     skins = gltf.skins or []
@@ -491,14 +334,14 @@ def _unique_names(names: list[str], order: list[int]) -> tuple[str, ...]:
     return tuple(n if seen[n] == 1 else f"{n}.{node}" for n, node in zip(names, order, strict=True))
 
 
-def _pick_animation(doc: _Document, nodes: set[int]) -> int | None:
+def _pick_animation(doc: GltfDocument, nodes: set[int]) -> int | None:
     for i in range(len(doc.gltf.animations or [])):
         if _animates(doc, i, nodes):
             return i
     return None
 
 
-def _animates(doc: _Document, animation: int, nodes: set[int]) -> bool:
+def _animates(doc: GltfDocument, animation: int, nodes: set[int]) -> bool:
     return any(
         ch.target is not None and ch.target.node in nodes and ch.target.path in _PATHS
         for ch in doc.gltf.animations[animation].channels or []
@@ -541,9 +384,6 @@ def _from_world_aligned(rig: _Rig, lrot: np.ndarray, lpos: np.ndarray):
     return rot.normalize(out_rot), out_pos
 
 
-# --- animation ---------------------------------------------------------------------------
-
-
 @dataclass
 class _Track:
     joint: int
@@ -553,7 +393,7 @@ class _Track:
     values: np.ndarray  # (K, D), or (K, 3, D) for CUBICSPLINE: in-tangent, value, out-tangent
 
 
-def _read_tracks(doc: _Document, rig: _Rig) -> list[_Track]:
+def _read_tracks(doc: GltfDocument, rig: _Rig) -> list[_Track]:
     animation = doc.gltf.animations[rig.animation]
     samplers = animation.samplers or []
     joint_of = {n: k for k, n in enumerate(rig.nodes)}
@@ -654,185 +494,3 @@ def _sample(track: _Track, times: np.ndarray) -> np.ndarray:
                 + (u3 - u2) * d * values[i + 1, 0]
             )
     return rot.normalize(out) if track.path == "rotation" else out
-
-
-# --- writing ----------------------------------------------------------------------------
-
-
-class _Writer:
-    """Puts new samplers and channels into one animation of a document and packs the GLB."""
-
-    def __init__(self, doc: _Document, animation: int | None) -> None:
-        self.doc = doc
-        self.gltf = doc.gltf
-        self.animation = animation
-
-    def write(self, times: np.ndarray, outputs: list[tuple[int, str, np.ndarray]]) -> bytes:
-        from pygltflib import (
-            Animation,
-            AnimationChannel,
-            AnimationChannelTarget,
-            AnimationSampler,
-            Buffer,
-        )
-
-        gltf = self.gltf
-        free_accessors, free_views = self._exclusive_to_animation()
-        blob = bytearray()
-        views: list[tuple[int, int]] = []  # (start, length) in the blob of each new view
-        for i, data in enumerate(self.doc.buffers):  # every buffer into one, views moved along
-            _pad(blob)
-            base = len(blob)
-            blob += data
-            for view in gltf.bufferViews or []:
-                if view.buffer == i:
-                    view.buffer = 0
-                    view.byteOffset = (view.byteOffset or 0) + base
-        arrays = [times[:, None]] + [values.astype(np.float32) for _, _, values in outputs]
-        for array in arrays:
-            _pad(blob)
-            views.append((len(blob), array.nbytes))
-            blob += np.ascontiguousarray(array, dtype="<f4").tobytes()
-        accessors = [
-            self._put_view_and_accessor(start, length, array, free_accessors, free_views)
-            for (start, length), array in zip(views, arrays, strict=True)
-        ]
-        self._stub_leftovers(free_accessors, free_views, blob)
-        samplers = [
-            AnimationSampler(input=accessors[0], output=acc, interpolation="LINEAR")
-            for acc in accessors[1:]
-        ]
-        channels = [
-            AnimationChannel(sampler=k, target=AnimationChannelTarget(node=node, path=path))
-            for k, (node, path, _) in enumerate(outputs)
-        ]
-        if self.animation is None:
-            gltf.animations = (gltf.animations or []) + [Animation(name="motion-style")]
-            self.animation = len(gltf.animations) - 1
-        animation = gltf.animations[self.animation]
-        animation.samplers = samplers
-        animation.channels = channels
-        gltf.buffers = [Buffer(byteLength=len(blob))]
-        gltf.set_binary_blob(bytes(blob))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return b"".join(gltf.save_to_bytes())
-
-    def _exclusive_to_animation(self) -> tuple[list[int], list[int]]:
-        """Accessors and buffer views that only the replaced animation uses (ascending)."""
-        gltf = self.gltf
-        if self.animation is None:
-            return [], []
-        old = gltf.animations[self.animation]
-        mine = {s.input for s in old.samplers or []} | {s.output for s in old.samplers or []}
-        others: set = set()
-        document = json.loads(gltf.gltf_to_json())  # to_dict() is 3x slower
-        for k, anim in enumerate(document.get("animations", [])):
-            if k != self.animation:
-                _collect_accessor_refs(anim, others)
-        for key, value in document.items():
-            if key not in ("animations", "accessors", "bufferViews", "buffers"):
-                _collect_accessor_refs(value, others)
-        accessors = sorted(
-            a for a in mine if isinstance(a, int) and a not in others
-            and 0 <= a < len(gltf.accessors or [])
-        )  # fmt: skip
-        used_views: dict[int, set[int]] = {}
-        for a, acc in enumerate(gltf.accessors or []):
-            refs = [acc.bufferView]
-            if acc.sparse is not None:
-                refs += [acc.sparse.indices.bufferView, acc.sparse.values.bufferView]
-            for v in refs:
-                if v is not None:
-                    used_views.setdefault(v, set()).add(a)
-        outside: set = set()
-        for key, value in document.items():
-            if key not in ("accessors", "bufferViews", "buffers", "animations"):
-                _collect_keyed(value, "bufferView", outside)
-        views = sorted(
-            v for v, users in used_views.items()
-            if users <= set(accessors) and v not in outside
-        )  # fmt: skip
-        return accessors, views
-
-    def _put_view_and_accessor(self, start, length, array, free_accessors, free_views) -> int:
-        from pygltflib import Accessor, BufferView
-
-        gltf = self.gltf
-        view = BufferView(buffer=0, byteOffset=start, byteLength=length)
-        if free_views:
-            v = free_views.pop(0)
-            gltf.bufferViews[v] = view
-        else:
-            gltf.bufferViews = (gltf.bufferViews or []) + [view]
-            v = len(gltf.bufferViews) - 1
-        width = array.shape[1]
-        accessor = Accessor(
-            bufferView=v,
-            byteOffset=0,
-            componentType=_FLOAT,
-            count=int(array.shape[0]),
-            type="SCALAR" if width == 1 else f"VEC{width}",
-            min=[float(x) for x in array.min(axis=0)],
-            max=[float(x) for x in array.max(axis=0)],
-        )
-        if free_accessors:
-            a = free_accessors.pop(0)
-            gltf.accessors[a] = accessor
-        else:
-            gltf.accessors = (gltf.accessors or []) + [accessor]
-            a = len(gltf.accessors) - 1
-        return a
-
-    def _stub_leftovers(self, free_accessors, free_views, blob: bytearray) -> None:
-        """Old accessors and views nothing uses any more become 4-byte stubs (indices stay)."""
-        from pygltflib import Accessor, BufferView
-
-        if not free_accessors and not free_views:
-            return
-        _pad(blob)
-        start = len(blob)
-        blob += np.zeros(1, "<f4").tobytes()
-        for v in free_views:
-            self.gltf.bufferViews[v] = BufferView(buffer=0, byteOffset=start, byteLength=4)
-        stub_view = free_views[0] if free_views else None
-        if stub_view is None and free_accessors:
-            self.gltf.bufferViews.append(BufferView(buffer=0, byteOffset=start, byteLength=4))
-            stub_view = len(self.gltf.bufferViews) - 1
-        for a in free_accessors:
-            self.gltf.accessors[a] = Accessor(
-                bufferView=stub_view, componentType=_FLOAT, count=1, type="SCALAR",
-                min=[0.0], max=[0.0],
-            )  # fmt: skip
-
-
-def _pad(blob: bytearray) -> None:
-    blob += b"\0" * (-len(blob) % 8)
-
-
-_ACCESSOR_KEYS = ("indices", "inverseBindMatrices", "input", "output", "accessor")
-
-
-def _collect_accessor_refs(value, out: set, key: str | None = None, in_attributes=False) -> None:
-    """Integers a glTF JSON subtree uses as accessor indices (core and the usual extensions)."""
-    if isinstance(value, dict):
-        for k, v in value.items():
-            _collect_accessor_refs(v, out, k, in_attributes or k in ("attributes", "targets"))
-    elif isinstance(value, list):
-        for v in value:
-            _collect_accessor_refs(v, out, key, in_attributes)
-    elif isinstance(value, int) and not isinstance(value, bool):
-        if in_attributes or key in _ACCESSOR_KEYS:
-            out.add(value)
-
-
-def _collect_keyed(value, name: str, out: set) -> None:
-    if isinstance(value, dict):
-        for k, v in value.items():
-            if k == name and isinstance(v, int):
-                out.add(v)
-            else:
-                _collect_keyed(v, name, out)
-    elif isinstance(value, list):
-        for v in value:
-            _collect_keyed(v, name, out)

@@ -125,9 +125,9 @@ def test_rigid_frame_above_the_rig_round_trips():
     doc = pygltflib.GLTF2.load_from_bytes(out)
     anim = doc.animations[0]
     by_target = {(doc.nodes[c.target.node].name, c.target.path): c.sampler for c in anim.channels}
-    from motion.gltf import _Document
+    from motion.gltf_container import GltfDocument
 
-    reader = _Document(out)
+    reader = GltfDocument(out)
     for key, (_, values, _) in tracks.items():
         written = reader.accessor(anim.samplers[by_target[key]].output, "test")
         if key[1] == "rotation":  # q and -q are one rotation
