@@ -24,7 +24,7 @@ from motion import bvh
 def main(argv: list[str] | None = None) -> dict:
     from service import limits
     from service.config import Settings
-    from service.engines.dance import DanceEngine
+    from service.engines.dance import DanceEngine, DanceJob
     from service.manifest import load_manifest
     from service.metrics import StageTimer
     from tests.songs import encoded, song
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> dict:
         timer = StageTimer(engine.name)
         with timer.stage("decode_audio"):
             samples, sr = limits.decode_audio(data, settings)
-        result = engine.dance(samples, sr, timer, genre=args.genre, seed=0)
+        result = engine.predict(DanceJob(samples, sr, genre=args.genre), timer)
         with timer.stage("write"):
             bvh.dumps(result.motion)
         return time.perf_counter() - started, dict(timer.ms), result.motion.num_frames

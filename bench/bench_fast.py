@@ -144,7 +144,7 @@ def time_engine(entry, settings, style: str, repeats: int) -> list[dict]:
     canonical walk tiled to each length."""
     from motion import bvh, retarget
     from motion import kinematics as K
-    from service.engines.fast import FastEngine
+    from service.engines.fast import FastEngine, FastJob
     from service.metrics import StageTimer
 
     engine = FastEngine(entry, settings.models_dir, settings)
@@ -159,7 +159,7 @@ def time_engine(entry, settings, style: str, repeats: int) -> list[dict]:
 
         def run(clip=clip, timers=timers):
             timer = StageTimer(engine.name)
-            engine.stylize(clip, style, timer)
+            engine.predict(FastJob(clip, style), timer)
             timers.append(timer.ms)
 
         seconds = timed(run, repeats)

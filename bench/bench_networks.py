@@ -5,7 +5,7 @@ and 3,840 frames, onnxruntime vs torch eager, measured in one run.
 
 Translator, what a transfer runs: the restyler over the content's windows (half a window
 apart) with a style code, and the same plus the 3D style encoder over the content (its own
-code, padded to the engine's length bucket, ``service.engines.translator.padded_length``);
+code, padded to the engine's length bucket, ``service.engines.restyling.padded_length``);
 frames/s counted on the clip's length. Dance (jacob2019 made to work): the audio network over the whole input (padded to
 the engine's bucket of 256 frames) and the step network run autoregressively for every
 frame (its own pose and LSTM states fed back, batch 1), and the two together (the sum of
@@ -68,7 +68,7 @@ def translator_rows(entry, settings, lengths, repeats: int, threads: int) -> tup
 
     from model_export.translator import load_checkpoint
     from service.engines.base import create_session
-    from service.engines.translator import BUCKET, padded_length
+    from service.engines.restyling import BUCKET, padded_length
     from training.translator.networks import NetworkConfig, Translator
 
     config = NetworkConfig(**entry.extra["network"])

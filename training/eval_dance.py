@@ -52,6 +52,8 @@ from motion import contacts as CT
 from motion import dance_features as DF
 from motion import kinematics as K
 from motion.skeleton import Motion
+from service.engines.dance import DanceJob
+from service.metrics import StageTimer
 from training import dance_metrics as DM
 
 TEN_MINUTES = 600.0
@@ -113,7 +115,6 @@ def any_level_f_measure(estimated: np.ndarray, reference: np.ndarray) -> float:
 
 def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
     """The beat test set: tracker and dance per pattern and tempo."""
-    from service.metrics import StageTimer
     from tests.songs import beat_test_set
 
     rows = []
@@ -130,8 +131,8 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
         }
         for seed in range(seeds):
             genre = DF.MUSIC_GENRES[(i + seed) % len(DF.MUSIC_GENRES)]
-            out = engine.dance(song.samples, song.sr, StageTimer(engine.name), genre=genre,
-                               seed=seed).motion  # fmt: skip
+            job = DanceJob(song.samples, song.sr, genre=genre, seed=seed)
+            out = engine.predict(job, StageTimer(engine.name)).motion
             score, chance = BW.alignment(out, song.beats)
             row["dances"].append({"genre": genre, "bas": round(score, 4),
                                   "chance": round(chance, 4),
@@ -147,7 +148,6 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
 def shared_songs(engine, log=print, names=None) -> dict:
     """Every Dance with Melody song, whole, danced in its own genre (seed 0): alignment to
     the tracker's beats beside shifted grids, stalls."""
-    from service.metrics import StageTimer
     from training.data import DWM_GENRES, data_dir
 
     rows = {}
@@ -157,7 +157,7 @@ def shared_songs(engine, log=print, names=None) -> dict:
             continue
         samples, sr = audio_decode.decode(folder / "audio.mp3")
         genre = DWM_GENRES[folder.name.split("_")[1]]
-        result = engine.dance(samples, sr, StageTimer(engine.name), genre=genre, seed=0)
+        result = engine.predict(DanceJob(samples, sr, genre=genre), StageTimer(engine.name))
         frames = result.motion.num_frames
         playing = audio_features.frame_features(samples, sr, DF.FPS, frames).playing
         rows[folder.name] = {
@@ -220,7 +220,6 @@ def genre_features(motion: Motion) -> np.ndarray:
 def held_out(engine, seeds: int, log=print) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats),
     genre recognition of every requested genre, foot sliding."""
-    from service.metrics import StageTimer
     from training.judges import ClipClassifier
 
     held, train = held_out_songs()
@@ -242,8 +241,8 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
         for seed in range(seeds):
             for asked in DF.MUSIC_GENRES:
-                out = engine.dance(samples, sr, StageTimer(engine.name), genre=asked,
-                                   seed=seed).motion  # fmt: skip
+                job = DanceJob(samples, sr, genre=asked, seed=seed)
+                out = engine.predict(job, StageTimer(engine.name)).motion
                 named = genre_clf.predict(genre_features(out))
                 confusion[asked][named] += 1
                 sliding["generated"].append(CT.canonical_foot_sliding(out))
@@ -254,8 +253,8 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 s, c = BW.alignment(out, beats)
                 rows["generated"].append((s, c))
                 song.setdefault("generated", []).append({"bas": round(s, 4), "chance": round(c, 4)})
-            raw = engine.dance(samples, sr, StageTimer(engine.name), genre=genre, seed=seed,
-                               beat_warp=False).motion  # fmt: skip
+            job = DanceJob(samples, sr, genre=genre, seed=seed, beat_warp=False)
+            raw = engine.predict(job, StageTimer(engine.name)).motion
             rows["generated_no_warp"].append(BW.alignment(raw, beats))
         songs[name] = song
         log(f"{name}: {json.dumps(song)}")
@@ -363,7 +362,6 @@ def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> d
 
 def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict:
     """The held-out songs' music looped to ``TEN_MINUTES``, one generation per seed."""
-    from service.metrics import StageTimer
 
     sr = music[0][1]
     loop = np.concatenate([m for m, s in music if s == sr])
@@ -371,7 +369,8 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
     playing = audio_features.frame_features(long_song, sr, DF.FPS).playing
     per_seed = []
     for seed in range(seeds):
-        out = engine.dance(long_song, sr, StageTimer(engine.name), genre="waltz", seed=seed)
+        job = DanceJob(long_song, sr, genre="waltz", seed=seed)
+        out = engine.predict(job, StageTimer(engine.name))
         per_seed.append({"seed": seed, "frames": out.motion.num_frames,
                          **energy_blocks(body_speed(out.motion), out.motion.fps),
                          **stall_figures(out.motion, playing)})  # fmt: skip

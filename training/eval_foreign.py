@@ -102,6 +102,8 @@ from motion import kinematics as K
 from motion import rotations as rot
 from motion.skeleton import Motion
 from motion.styles import canonical_style
+from service.engines.translator import StyleCodeJob, TransferJob
+from service.metrics import StageTimer
 from training import judges
 from training.judges import (
     ConvClipClassifier,
@@ -222,7 +224,6 @@ def through_service(motion: Motion) -> Motion:
     from motion import bvh
     from service.clips import Upload, load_clip
     from service.config import Settings
-    from service.metrics import StageTimer
 
     upload = Upload("content", data=bvh.dumps(motion).encode())
     return load_clip(upload, Settings(), StageTimer("eval-foreign")).canonical
@@ -646,7 +647,7 @@ class ByStyleClip:
     """The translator with a real take of the style as the style clip instead of its name:
     for each item and style, one of the style's Bandai takes, picked by a hash of the item
     (its rig variants get the same) and the take, so a half's items spread over the style's
-    actions and performers. Its code is the 3D encoder's (``code_of_motion``, bounded as the
+    actions and performers. Its code is the 3D encoder's (the engine's core on the take, bounded as the
     service bounds a clip's), played as the service plays a clip's (the engine's
     ``played``), and the time warp the paper's ratio of velocity factors, as ``POST
     /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in ten of
@@ -676,16 +677,14 @@ class ByStyleClip:
         )
 
     def code_of(self, engine, take):
-        return engine.code_of_motion(self.motion(take))
+        return engine.predict(StyleCodeJob(self.motion(take)), StageTimer(engine.name))
 
     def __call__(self, engine, item: Item, style: str) -> Motion:
         take = self.take_for(item, style)
         if take.name not in self.codes:
             self.codes[take.name] = self.code_of(engine, take)
         code = self.codes[take.name]
-        return engine.transfer(
-            item.motion, code.code, style_velocity=code.velocity, source=code.source
-        ).motion
+        return engine.predict(TransferJob(item.motion, code), StageTimer(engine.name)).motion
 
 
 class ByStyleVideo(ByStyleClip):
@@ -693,14 +692,15 @@ class ByStyleVideo(ByStyleClip):
     from one side (yaw uniform in +-90 degrees, as training projects its views, seeded by
     the take: one video per take) as the joints OpenPose observes
     (``keypoints_of_positions``), through the service's keypoint path
-    (``code_of_keypoints``, ``played``; no velocity factor, so no time warp). Projected
+    (the engine's core on the keypoints, ``played``; no velocity factor, so no time warp). Projected
     mocap is a video without a tracker's noise: real videos may carry a style less."""
 
     def code_of(self, engine, take):
         seed = zlib.crc32(f"{take.name}|view".encode())
         yaw = np.deg2rad(np.random.default_rng(seed).uniform(-90.0, 90.0))
         gpos = K.global_positions(self.motion(take))
-        return engine.code_of_keypoints(Fe.keypoints_of_positions(gpos, yaw))
+        kp = Fe.keypoints_of_positions(gpos, yaw)
+        return engine.predict(StyleCodeJob(kp), StageTimer(engine.name))
 
 
 # one adapter per family: where a family's engine API changes, only its adapter does

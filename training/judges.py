@@ -286,13 +286,12 @@ def transfer(family: str, engine, canon: Motion, style: str, time_warp: bool = T
     """``canon`` in ``style`` through the shipped engine, as the service runs it (foot
     clean-up on, the time warp unless ``time_warp`` is off): the translator by the style's
     name at strength 1, the fast networks by theirs."""
+    from service.engines.fast import FastJob
+    from service.engines.translator import TransferJob
+    from service.metrics import StageTimer
+
     if family == "translator":
-        target = engine.code_of_name(style)
-        return engine.transfer(
-            canon,
-            target.code,
-            time_warp=time_warp,
-            style_velocity=target.velocity,
-            style_speed=target.speed,
-        ).motion
-    return engine.stylize(canon, style, time_warp=time_warp)
+        job = TransferJob(canon, engine.code_of_name(style), time_warp=time_warp)
+    else:
+        job = FastJob(canon, style, time_warp=time_warp)
+    return engine.predict(job, StageTimer(engine.name)).motion

@@ -3,7 +3,7 @@
     python -m training.output_smoothing translator|fast [--models-dir DIR]
 
 Both families smooth their network's output rotations over time, a Gaussian of sigma
-frames (``service.engines.translator.restyled_motion``), against the frame-to-frame
+frames (``service.engines.restyling.restyled_motion``), against the frame-to-frame
 jitter a network adds; the same smoothing takes the styles' own quick movements (angry's
 flailing, active's pumping). So each exported model gets the smallest sigma of
 :data:`CANDIDATES` at which its output, as the service finishes it, jerks no more than

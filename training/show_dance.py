@@ -48,6 +48,7 @@ def render(rows: list[tuple[str, Motion]], start: float, seconds: float, title: 
 def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
     """``(label, motion)`` rows: per genre the real dance of its song, then the generated."""
     from motion import audio_decode
+    from service.engines.dance import DanceJob
     from service.metrics import StageTimer
     from training import dance as TD
     from training import dance_alignment as DA
@@ -72,7 +73,8 @@ def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
         )
         first = int(round(max(alignment.offset, 0.0) * sr))
         part = samples[first : first + int(round(real.num_frames / real.fps * sr))]
-        out = engine.dance(part, sr, StageTimer(engine.name), genre=genre, seed=seed).motion
+        job = DanceJob(part, sr, genre=genre, seed=seed)
+        out = engine.predict(job, StageTimer(engine.name)).motion
         held = "held-out song" if name in TD.VAL_TAKES else "training song"
         rows += [(f"{genre}: real ({name[6:]})", real), (f"generated ({held})", out)]
     return rows

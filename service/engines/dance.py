@@ -7,7 +7,9 @@ back its own pose (LSTM states explicit), from a seeded start pose with seeded n
 fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
 motion (root integrated) -> feet pinned and gliding feet lifted -> time warp putting its
 kinematic beats on the song's pulses (``motion.beat_warp``) -> the requested frame rate ->
-onto the request's skeleton, if any.
+onto the request's skeleton, if any. The family's core, :meth:`DanceEngine.predict`, runs
+from the decoded samples to the canonical dance at 30 fps; the service (through ``prepare``
+and ``finish``) and the evaluations call the same one.
 """
 
 from __future__ import annotations
@@ -36,18 +38,14 @@ NOISE = 0.05  # std of the seeded noise on the fed-back pose (standardised units
 
 @dataclass
 class DanceJob:
-    """A prepared dance: the music's standardised features ``x (F, A)``, its beats and
-    tempo, the seeded start pose, and for a request the skeleton's clip and frame count."""
+    """The core's input: decoded music ``samples (N,)`` at ``sr``, the genre (predicted
+    when None), the seed and the finishing steps; for a request, the skeleton's clip, the
+    answer's rate, frame count and format, for ``finish``."""
 
-    x: np.ndarray
-    tempo: float
-    beats: np.ndarray
-    pulses: np.ndarray  # the beats, and the half beats where the song hits them as hard
-    playing: np.ndarray  # (F,) bool: frames where the music plays
-    genre: str | None
-    seed: int
-    start: np.ndarray
-    noise_seed: int
+    samples: np.ndarray
+    sr: int
+    genre: str | None = None
+    seed: int = 0
     beat_warp: bool = True
     foot_cleanup: bool = True
     clip: Clip | None = None
@@ -57,8 +55,22 @@ class DanceJob:
 
 
 @dataclass
+class Music:
+    """The music's standardised features ``x (F, A)``, its beats and tempo, and the seeded
+    start pose and noise seed of the rollout."""
+
+    x: np.ndarray
+    tempo: float
+    beats: np.ndarray
+    pulses: np.ndarray  # the beats, and the half beats where the song hits them as hard
+    playing: np.ndarray  # (F,) bool: frames where the music plays
+    start: np.ndarray
+    noise_seed: int
+
+
+@dataclass
 class DanceNetworks:
-    """What :meth:`DanceEngine.predict` returns: the genre (given or predicted) and its
+    """What the networks give: the genre (given or predicted) and its
     probabilities, and the rolled-out standardised poses ``(F, M)``."""
 
     genre: str
@@ -139,7 +151,7 @@ class DanceEngine(Engine):
     def prepare(self, request: DanceRequest, timer: StageTimer) -> DanceJob:
         """Decode the music (413 over ``max_audio_seconds``, 422 when silent), check the
         answer's frame count, read the skeleton (BVH, or a glTF rig: its rest pose when it
-        has no animation), compute the music's features."""
+        has no animation)."""
         if request.skeleton is None:
             answer_format(None, request.format)  # format=glb without a glTF rig: 400 now
         with timer.stage("decode_audio"):
@@ -159,47 +171,36 @@ class DanceEngine(Engine):
                 answer=request.format,
                 rest_if_unanimated=True,
             )
-        job = self._job(samples, sr, timer, genre=request.genre, seed=request.seed)
-        job.clip, job.fps, job.frames = clip, float(request.fps), frames
-        job.format = request.format
-        return job
+        return DanceJob(samples, sr, request.genre, request.seed, clip=clip,
+                        fps=float(request.fps), frames=frames, format=request.format)  # fmt: skip
 
-    def _job(
-        self,
-        samples: np.ndarray,
-        sr: int,
-        timer: StageTimer,
-        *,
-        genre: str | None,
-        seed: int,
-        beat_warp: bool = True,
-        foot_cleanup: bool = True,
-    ) -> DanceJob:
+    def _music(self, job: DanceJob, timer: StageTimer) -> Music:
         with timer.stage("features"):
-            frames = max(2, math.ceil(len(samples) / sr * DF.FPS - 1e-9))
-            feats = audio_features.frame_features(samples, sr, DF.FPS, frames)
+            frames = max(2, math.ceil(len(job.samples) / job.sr * DF.FPS - 1e-9))
+            feats = audio_features.frame_features(job.samples, job.sr, DF.FPS, frames)
             x = self.stats.normalize_audio(feats.matrix())
-        rng = np.random.default_rng(seed)
+        rng = np.random.default_rng(job.seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])
         noise_seed = int(rng.integers(2**31))
-        return DanceJob(x, float(feats.tempo), feats.beats, feats.pulses, feats.playing, genre,
-                        seed, start, noise_seed, beat_warp, foot_cleanup)  # fmt: skip
+        return Music(x, float(feats.tempo), feats.beats, feats.pulses, feats.playing, start,
+                     noise_seed)  # fmt: skip
 
-    def predict(self, job: DanceJob, timer: StageTimer) -> DanceNetworks:
-        """The audio graph (codes, genre probabilities), the genre (the given one, else the
-        most probable), then the step graph frame by frame."""
+    def predict(self, job: DanceJob, timer: StageTimer) -> DanceResult:
+        """The family's core: the music's features, the audio graph (codes, genre
+        probabilities), the genre (the given one, else the most probable), the step graph
+        frame by frame, then the motion (:meth:`_dance`)."""
+        music = self._music(job, timer)
         with timer.stage("network"):
-            code, probs = self.encode(job.x)
+            code, probs = self.encode(music.x)
         probs_by_genre = {
             g: round(float(p), 4) for g, p in zip(DF.MUSIC_GENRES, probs, strict=True)
         }
         genre = job.genre or DF.MUSIC_GENRES[int(np.argmax(probs))]
         with timer.stage("step"):
-            poses = self.rollout(code, DF.genre_vector(genre), job.start, job.noise_seed)
-        return DanceNetworks(genre, probs_by_genre, poses)
+            poses = self.rollout(code, DF.genre_vector(genre), music.start, music.noise_seed)
+        return self._dance(job, music, DanceNetworks(genre, probs_by_genre, poses), timer)
 
-    def finish(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> Result:
-        result = self._dance(job, out, timer)
+    def finish(self, job: DanceJob, result: DanceResult, timer: StageTimer) -> Result:
         with timer.stage("resample"):
             canon = K.resample_count(result.motion, job.fps, job.frames)
         warnings = list(result.warnings)
@@ -219,7 +220,9 @@ class DanceEngine(Engine):
             fmt=job.format,
         )
 
-    def _dance(self, job: DanceJob, out: DanceNetworks, timer: StageTimer) -> DanceResult:
+    def _dance(
+        self, job: DanceJob, music: Music, out: DanceNetworks, timer: StageTimer
+    ) -> DanceResult:
         """The rolled-out poses -> a canonical dance at 30 fps: low-passed, standstills
         filled, root integrated, feet cleaned up, its kinematic beats warped onto the music's
         pulses; and its beat alignment."""
@@ -227,39 +230,21 @@ class DanceEngine(Engine):
         if job.genre is None:
             p = out.genre_probs[out.genre]
             warnings.append(f"genre not given: predicted {out.genre} (p = {p:.2f})")
-        if job.tempo <= 0:
+        if music.tempo <= 0:
             warnings.append("no beat found in the music: the dance is not beat-aligned")
         with timer.stage("motion"):
             raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
-            _, motion = DF.keep_moving(raw, job.playing)
-        beats = job.beats
+            _, motion = DF.keep_moving(raw, music.playing)
+        beats = music.beats
         if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
             with timer.stage("foot_cleanup"):
                 motion = DF.clean_feet(motion)
         if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
-                motion = BW.warp_to_beats(motion, job.pulses).motion
+                motion = BW.warp_to_beats(motion, music.pulses).motion
         bas, chance = BW.alignment(motion, beats)
         return DanceResult(motion, out.genre, out.genre_probs, job.genre is not None,
-                           job.tempo, beats, bas, chance, warnings)  # fmt: skip
-
-    def dance(
-        self,
-        samples: np.ndarray,
-        sr: int,
-        timer: StageTimer | None = None,
-        *,
-        genre: str | None = None,
-        seed: int = 0,
-        beat_warp: bool = True,
-        foot_cleanup: bool = True,
-    ) -> DanceResult:
-        """A canonical motion at 30 fps covering the decoded ``samples (N,)`` at ``sr``: the
-        three steps without an upload, for the evaluations."""
-        timer = timer or StageTimer(self.name)
-        job = self._job(samples, sr, timer, genre=genre, seed=seed, beat_warp=beat_warp,
-                        foot_cleanup=foot_cleanup)  # fmt: skip
-        return self._dance(job, self.predict(job, timer), timer)
+                           music.tempo, beats, bas, chance, warnings)  # fmt: skip
 
 
 register_engine("dance", DanceEngine)

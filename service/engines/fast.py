@@ -1,18 +1,16 @@
 """The fast family: one small network per style name, distilled from the translator's
 restyler (``training.fast_style``), onnxruntime only.
 
-A request's canonical clip goes: the translator's features (``motion.features.encode``)
--> the restyler's input (head, hands, feet and travel about the clip's own mean posture,
-standardised with the bundle's statistics, the translator's) -> mirrored at both ends
-(as many frames as the networks see either side, then up to a multiple of ``BUCKET``
-frames, so onnxruntime sees few shapes and short clips still fill the receptive field)
--> the style's network, the whole clip in one call -> finished as the translator finishes
-its own output, at the style's ``strength`` (else the bundle's)
-(:func:`service.engines.translator.restyled_motion`: smoothed by the bundle's own
-``output_smoothing``, taken that far from the
-content's own pose (above 1: past the network's, away from the content's), on the
-content's root trajectory, feet planted where the content's
-are, on its floor, and clear of it where the content's are in the air) -> played at the
+The family's core, :meth:`FastEngine.predict`, takes and returns canonical motion; the
+service (through ``prepare`` and ``finish``) and the evaluations call the same one. A
+canonical clip goes: the translator's features (``motion.features.encode``) -> the
+restyler's input (head, hands, feet and travel about the clip's own mean posture,
+standardised with the bundle's statistics, the translator's) -> mirrored at both ends (as
+many frames as the networks see either side, then up to a multiple of ``BUCKET`` frames, so
+onnxruntime sees few shapes and short clips still fill the receptive field) -> the style's
+network, the whole clip in one call -> finished as the translator's restyler output is
+(:func:`service.engines.restyling.restyled_motion`), at the style's ``strength`` (else the
+bundle's; above 1: past the network's pose, away from the content's) -> played at the
 style's speed.
 """
 
@@ -25,13 +23,12 @@ import numpy as np
 
 from motion import features as Fe
 from motion.skeleton import Motion
-from service.clips import Clip, Result, Upload, load_clip, write_result
+from service.clips import Clip, Result, load_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
-from service.engines.translator import (
+from service.engines.restyling import (
     BUCKET,
-    MAX_WARP,
-    MIN_WARP,
+    clamp_warp,
     pad_mirrored,
     padded_length,
     restyled_motion,
@@ -43,18 +40,23 @@ from service.requests import StylizeRequest
 
 @dataclass
 class FastJob:
-    """A prepared stylization: the clip (None for a canonical motion given directly), its
-    canonical motion and features, the padded network input ``(1, C, T)`` and where the
-    clip starts in it."""
+    """The core's input: canonical ``content`` at 30 fps, the style's name, and the request's
+    content clip (None when the caller gives canonical motion) for ``finish``."""
 
-    clip: Clip | None
-    canon: Motion
+    content: Motion
     style: str
-    features: Fe.Encoded
-    x: np.ndarray
-    offset: int
-    foot_cleanup: bool
-    time_warp: bool = False
+    foot_cleanup: bool = True
+    time_warp: bool = True
+    clip: Clip | None = None
+
+
+@dataclass
+class Stylized:
+    """The core's result: canonical motion at 30 fps and the time warp applied to it
+    (``finish`` warps the original clip by the same factor)."""
+
+    motion: Motion
+    warp: float
 
 
 class FastEngine(Engine):
@@ -72,7 +74,7 @@ class FastEngine(Engine):
         self.aliases = {a: n for a, n in extra.get("aliases", {}).items() if n in self.style_info}
         self.strength = float(extra["strength"])  # model_export.fast's
         self.margin = int(extra["receptive_field"])  # frames the networks see either side
-        # sigma in frames, chosen at export by training.output_smoothing
+        # sigma in frames, chosen at export by model_export.output_smoothing
         self.output_smoothing = float(extra["output_smoothing"])
 
     def styles(self) -> list[dict[str, Any]]:
@@ -95,8 +97,11 @@ class FastEngine(Engine):
         return self.style_of(request.style_name) is not None
 
     def refusal(self, request: StylizeRequest) -> NotFound:
+        return self._unknown(request.style_name)
+
+    def _unknown(self, name: str) -> NotFound:
         return NotFound(
-            f"no fast style named {request.style_name!r}",
+            f"no fast style named {name!r}",
             styles=sorted(self.style_info),
             model=self.name,
         )
@@ -107,85 +112,53 @@ class FastEngine(Engine):
         clip = load_clip(
             request.content, self.settings, timer, mapping=request.mapping, answer=request.format
         )
-        job = self._job(clip.canonical, request.style_name, request.foot_cleanup, timer, clip)
-        job.time_warp = request.time_warp
-        return job
+        return FastJob(clip.canonical, request.style_name, request.foot_cleanup,
+                       request.time_warp, clip)  # fmt: skip
 
-    def _job(
-        self,
-        canon: Motion,
-        style: str,
-        foot_cleanup: bool,
-        timer: StageTimer,
-        clip: Clip | None = None,
-    ) -> FastJob:
-        if self.style_of(style) is None:
-            raise self.refusal(StylizeRequest(Upload("content"), style))
-        style = self.style_of(style)
+    def predict(self, job: FastJob, timer: StageTimer) -> Stylized:
+        """The family's core: the style's network on the content, finished at the style's
+        strength (:meth:`strength_of`), played at its speed with ``time_warp``."""
+        style = self.style_of(job.style)
+        if style is None:
+            raise self._unknown(job.style)
+        content = job.content
         with timer.stage("features"):
-            enc = Fe.encode(canon)
-            control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
-            padded, offset = pad_mirrored(control, padded_length(len(control) + 2 * self.margin))
-            x = np.ascontiguousarray(padded.T[None], dtype=np.float32)
-        return FastJob(clip, canon, style, enc, x, offset, foot_cleanup)
-
-    def predict(self, job: FastJob, timer: StageTimer) -> np.ndarray:
-        """The style's network: ``(1, OUTPUT_CHANNELS, T)``."""
+            enc = Fe.encode(content)
+            x, offset = self.network_input(enc)
         with timer.stage("network"):
-            return self.run(self.style_info[job.style]["graph"], {"control": job.x})[0]
-
-    def finish(self, job: FastJob, output: np.ndarray, timer: StageTimer) -> Result:
-        motion = self._motion(job, output, timer)
-        factor = self.warp_factor(job.style) if job.time_warp else 1.0
+            output = self.run(self.style_info[style]["graph"], {"control": x})[0]
+        channels = output[0, :, offset : offset + content.num_frames].T
+        motion = restyled_motion(channels, content, enc, self.stats, timer, self.output_smoothing,
+                                 self.strength_of(style), job.foot_cleanup)  # fmt: skip
+        factor = self.warp_factor(style) if job.time_warp else 1.0
         if factor != 1.0:
             with timer.stage("time_warp"):
                 motion = Fe.time_warp(motion, factor)
-        return write_result(job.clip, motion, self.settings, timer, suffix=job.style, warp=factor)
+        return Stylized(motion, factor)
+
+    def finish(self, job: FastJob, out: Stylized, timer: StageTimer) -> Result:
+        style = self.style_of(job.style)
+        return write_result(job.clip, out.motion, self.settings, timer, suffix=style,
+                            warp=out.warp)  # fmt: skip
+
+    def network_input(self, enc: Fe.Encoded) -> tuple[np.ndarray, int]:
+        """The networks' input ``(1, C, T)`` of an encoded canonical clip: the restyler's
+        input mirrored at both ends (at least :attr:`margin` frames each), and where the
+        clip starts in it."""
+        control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
+        padded, offset = pad_mirrored(control, padded_length(len(control) + 2 * self.margin))
+        return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
 
     def warp_factor(self, style: str) -> float:
         """How much faster than the content a style plays: its speed against the other
         styles on the same actions (the translator's), clamped to [MIN_WARP, MAX_WARP];
         1 for a bundle that gives none."""
-        speed = float(self.style_info[style].get("speed") or 1.0)
-        return min(max(speed, MIN_WARP), MAX_WARP)
+        return clamp_warp(float(self.style_info[style].get("speed") or 1.0))
 
     def strength_of(self, style: str) -> float:
         """How far from the content's pose to the network's ``style`` is played: the style's
         own ``strength`` in the bundle, else the bundle's."""
         return float(self.style_info[style].get("strength", self.strength))
-
-    def _motion(self, job: FastJob, output: np.ndarray, timer: StageTimer) -> Motion:
-        """The network's output -> a canonical motion, as the translator finishes its own
-        at the style's strength (:meth:`strength_of`)."""
-        frames = job.canon.num_frames
-        channels = output[0, :, job.offset : job.offset + frames].T
-        return restyled_motion(
-            channels,
-            job.canon,
-            job.features,
-            self.stats,
-            timer,
-            self.output_smoothing,
-            self.strength_of(job.style),
-            job.foot_cleanup,
-        )
-
-    def stylize(
-        self,
-        canon: Motion,
-        style: str,
-        timer: StageTimer | None = None,
-        foot_cleanup: bool = True,
-        time_warp: bool = True,
-    ) -> Motion:
-        """A canonical motion at 30 fps in ``style`` (the content's trajectory and rate,
-        played at the style's speed with ``time_warp``): the three steps without an upload,
-        for the evaluations."""
-        timer = timer or StageTimer(self.name)
-        job = self._job(canon, style, foot_cleanup, timer)
-        motion = self._motion(job, self.predict(job, timer), timer)
-        factor = self.warp_factor(job.style) if time_warp else 1.0
-        return motion if factor == 1.0 else Fe.time_warp(motion, factor)
 
 
 register_engine("fast", FastEngine)

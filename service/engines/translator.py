@@ -12,24 +12,14 @@ receptive field) by mirroring it at both ends, so onnxruntime sees few shapes; t
 of the named styles were computed the same way (their mean over the style's Bandai
 takes). A name may be another name of a style (``extra.aliases``: old is elderly).
 
-A transfer: restyle with the target code; smooth the rotations over time (a Gaussian of
-``extra.output_smoothing`` frames, chosen per model at export by
-``training.output_smoothing``: the least that leaves the output no jerkier than real
-mocap); at a ``strength`` below 1, each joint's rotation
-goes that part of the way from the content's own to the restyled one (0 gives the content
-back); the content's root trajectory
-(``features.decode_motion``); the feet planted where the CONTENT's are held on the
-content's floor (the knees bend to reach it down to ``grounding.KNEE_ABSORB`` of a leg,
-the hips move for the rest), and the feet the content has in the air kept clear of the floor
-(``grounding.pin_canonical_feet``);
-then the time warp, to the power ``strength`` and clamped to [``MIN_WARP``, ``MAX_WARP``]:
-for a style clip the ratio of velocity factors (style over content, aberman2020); for a
-named style or mix the style's speed against the other styles on the same action
-(``model_export.translator.style_speeds``), over the speed of the named style the content
-itself is in, if any (:meth:`TranslatorEngine.own_speed`).
-
-A little over 600 lines: the family's three request kinds share one job, one style-code
-path and one finish, which the fast family reuses.
+The family's core, :meth:`TranslatorEngine.predict`, takes and returns canonical motion;
+the service (through ``prepare`` and ``finish``) and the evaluations call the same one. A
+transfer: restyle with the target code, finish as :mod:`service.engines.restyling` does;
+then the time warp, to the power ``strength`` and clamped: for a style clip the ratio of
+velocity factors (style over content, aberman2020); for a named style or mix the style's
+speed against the other styles on the same action (``model_export.translator``), over the
+speed of the named style the content itself is in, if any
+(:meth:`TranslatorEngine.own_speed`).
 """
 
 from __future__ import annotations
@@ -38,11 +28,9 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
-from motion import contacts as CT
 from motion import features as Fe
-from motion import grounding, kernels
+from motion import kernels
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from motion.styles import exaggerated
@@ -50,6 +38,14 @@ from service import limits
 from service.clips import Clip, Result, load_clip, name_the_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
+from service.engines.restyling import (
+    BUCKET,
+    MAX_WARP,
+    MIN_WARP,
+    pad_mirrored,
+    padded_length,
+    restyled_motion,
+)
 from service.errors import NotFound
 from service.metrics import StageTimer
 from service.registered_styles import RegisteredStyle
@@ -64,81 +60,62 @@ from service.requests import (
 )
 
 TranslatorRequest = TransferRequest | StyleCodeRequest | RegisterStyleRequest
+# a style as the core takes it: a code (a name's or a mix's, or one computed before), or a
+# canonical clip or a video's keypoints to encode
+StyleInput = StyleCode | Motion | Keypoints2D
 
-BUCKET = 64  # frames: padded lengths are multiples of this
-MIN_WARP, MAX_WARP = 0.5, 2.0  # time warp factors are clamped to this range
 NEAREST = 5  # named styles listed by nearest()
 # Codes from a clip or a video are scaled down to this multiple of the largest named style
-# code's norm: Bandai clips' own codes reach 1.2x it, and the decoder, which never saw
-# larger codes, then throws the body about. Real-video walks code at 0.4-0.6x; a video of
-# someone collapsing at 2x.
+# code's norm: the decoder never saw larger codes, and throws the body about on them
+# (docs/experiments/translator_engine.md).
 CODE_NORM_LIMIT = 1.25
 # A clip is in a named style when its own style code lies within SAME_STYLE_NEAR x the
 # smallest distance between two named codes of that style's code; beyond SAME_STYLE_FAR x it
-# is in none (fading between), and a named target's speed then stands alone. On 0.1.71412
-# (smallest distance 6.75) the 51 held-out Bandai takes lie 0.9-4.2 from their nearest
-# named code (median 1.9), which is their own style for all 26 within 2.0 and for 44 of the
-# 51; the 9 CMU clips of ../shared/data/cmu-31 lie 3.5-6.0 from theirs (normal or proud).
+# is in none (fading between), and a named target's speed then stands alone.
 SAME_STYLE_NEAR, SAME_STYLE_FAR = 0.3, 0.5
-# Overlapping windows of the training length (``extra.window``) run through the restyler,
-# half a window apart; a bundle must name its length.
-WINDOWS_PER_CALL = 256  # bounds the batch (memory) on long clips
+WINDOWS_PER_CALL = 256  # restyler windows per call: bounds the batch (memory) on long clips
+
+
+@dataclass
+class TransferJob:
+    """The core's transfer: canonical ``content`` at 30 fps in ``style``, and the request's
+    content clip (None when the caller gives canonical motion) for ``finish``."""
+
+    content: Motion
+    style: StyleInput
+    strength: float = 1.0
+    time_warp: bool = True
+    foot_cleanup: bool = True
+    clip: Clip | None = None
+
+
+@dataclass
+class StyleCodeJob:
+    """The core's style code of one style input."""
+
+    style: StyleInput
+
+
+@dataclass
+class RegistrationJob:
+    """A registration: each clip on the canonical skeleton with its name for messages."""
+
+    request: RegisterStyleRequest
+    clips: list[tuple[str, Motion]]
+
+    @property
+    def frames(self) -> int:
+        return sum(motion.num_frames for _, motion in self.clips)
 
 
 @dataclass
 class Transfer:
     """A transfer's canonical result (30 fps, after clean-up and warp), the time-warp factor
-    applied to it (the caller warps the original clip by the same factor) and warnings."""
+    applied to it (``finish`` warps the original clip by the same factor) and warnings."""
 
     motion: Motion
     warp: float
     warnings: list[str] = field(default_factory=list)
-
-
-def restyled_motion(
-    output: np.ndarray,
-    content: Motion,
-    enc: Fe.Encoded,
-    stats: Fe.FeatureStats,
-    timer: StageTimer,
-    smoothing: float,
-    strength: float = 1.0,
-    foot_cleanup: bool = True,
-) -> Motion:
-    """A restyler's standardised output ``(F, OUTPUT_CHANNELS)`` for the canonical
-    ``content`` (encoded as ``enc``) -> the canonical result: smoothed over time (a Gaussian
-    of ``smoothing`` frames, the bundle's ``output_smoothing``), taken ``strength`` of the
-    way from the content's own pose, on the content's root trajectory, feet on its floor
-    (module docstring). The fast networks' output is finished the same way."""
-    with timer.stage("rotations"):
-        output = Fe.unstandardize(output, stats, "output")
-        if smoothing > 0:
-            output = gaussian_filter1d(output, smoothing, axis=0, mode="nearest")
-        if strength != 1.0:  # part of the way from the content's own pose, or past the output
-            own = enc.content[:, : Fe.OUTPUT_CHANNELS]
-            output = own + np.float32(strength) * (output - own)
-        motion = Fe.decode_motion(output, content, face=enc.facing)
-    if foot_cleanup:
-        with timer.stage("foot_cleanup"):
-            feet = enc.gpos  # the features' FK: contacts and floor read the content posed once
-            contacts = CT.canonical_foot_contacts(content, positions=feet)
-            motion = grounding.pin_canonical_feet(
-                motion, contacts, floor_of=content, floor_positions=feet
-            )
-    return motion
-
-
-def padded_length(frames: int, minimum: int = BUCKET) -> int:
-    """The bucket a clip of ``frames`` frames runs at: a multiple of ``BUCKET``, >= ``minimum``."""
-    return max(-(-frames // BUCKET) * BUCKET, -(-minimum // BUCKET) * BUCKET)
-
-
-def pad_mirrored(x: np.ndarray, total: int) -> tuple[np.ndarray, int]:
-    """``x (F, C)`` mirrored at both ends to ``total`` frames; returns it and the offset of
-    frame 0 (crop ``[offset : offset + F]``)."""
-    extra = total - len(x)
-    before = extra // 2
-    return np.pad(x, ((before, extra - before), (0, 0)), mode="symmetric"), before
 
 
 def window_starts(frames: int, window: int, hop: int | None = None) -> list[int]:
@@ -149,49 +126,6 @@ def window_starts(frames: int, window: int, hop: int | None = None) -> list[int]
     if starts[-1] != frames - window:
         starts.append(frames - window)
     return starts
-
-
-@dataclass
-class TranslatorJob:
-    """A prepared request: the style (a code already, for names and mixes; else the style
-    network's input ``x_style`` and which graph reads it) and, for a transfer, the content:
-    its clip (None for a canonical motion given directly), features and windows."""
-
-    style: StyleCode | None
-    style_graph: str | None = None
-    x_style: np.ndarray | None = None
-    style_velocity: float | None = None
-    clip: Clip | None = None
-    content: Motion | None = None
-    features: Fe.Encoded | None = None
-    control: np.ndarray | None = None  # (F, C) the restyler's input, standardised
-    windows: np.ndarray | None = None  # (N, C, window) cut from it
-    offset: int = 0
-    length: int = 0
-    x_own: np.ndarray | None = None  # (1, C, T) the content's own style input
-    strength: float = 1.0
-    time_warp: bool = True
-    foot_cleanup: bool = True
-
-
-@dataclass
-class RegistrationJob:
-    """A prepared registration: each clip's style job (as :meth:`TranslatorEngine.prepare`
-    makes one for a style clip) with the clip's name for messages, and the clips' frames."""
-
-    request: RegisterStyleRequest
-    clips: list[tuple[str, TranslatorJob]]
-    frames: int
-
-
-@dataclass
-class Networks:
-    """What :meth:`TranslatorEngine.predict` returns: the target style code, and for a
-    transfer the content's own code and the decoded windows ``(N, C, window)``."""
-
-    style: StyleCode
-    own: np.ndarray | None = None
-    decoded: np.ndarray | None = None
 
 
 class TranslatorEngine(Engine):
@@ -225,7 +159,7 @@ class TranslatorEngine(Engine):
         self.max_code_norm = CODE_NORM_LIMIT * float(np.linalg.norm(self.codes, axis=1).max())
         self.min_frames = padded_length(1, int(extra["receptive_field"]))
         self.window = int(extra["window"])
-        # sigma in frames, chosen at export by training.output_smoothing
+        # sigma in frames, chosen at export by model_export.output_smoothing
         self.output_smoothing = float(extra["output_smoothing"])
         declared = self.entry.graphs["style3d"].outputs[0].shape[-1]
         if declared != self.style_dim:
@@ -265,52 +199,44 @@ class TranslatorEngine(Engine):
             f"no translator style named {name!r}", styles=sorted(self.style_names), model=self.name
         )
 
-    # --- prepare ---------------------------------------------------------------------------
+    # --- prepare: the uploads onto the canonical skeleton -----------------------------------
 
     def prepare(
         self, request: TranslatorRequest, timer: StageTimer
-    ) -> TranslatorJob | RegistrationJob:
-        """Read the style input (a name or mix: its code; a clip or keypoints: the style
-        network's input) and, for a transfer, the content clip onto the canonical skeleton
-        and into standardised windows; for a registration, each clip's style input."""
+    ) -> TransferJob | StyleCodeJob | RegistrationJob:
+        """The style input (a name or mix: its code; a clip: canonical; keypoints: read)
+        and, for a transfer, the content clip onto the canonical skeleton; for a
+        registration, each clip."""
         if isinstance(request, RegisterStyleRequest):
             return self._registration_job(request, timer)
-        job = self._style_job(request.style, timer)
-        if isinstance(request, TransferRequest):
-            clip = load_clip(
-                request.content,
-                self.settings,
-                timer,
-                mapping=request.mapping,
-                answer=request.format,
-            )
-            self._content_job(job, clip.canonical, timer)
-            job.clip = clip
-            job.strength = request.strength
-            job.time_warp = request.time_warp
-            job.foot_cleanup = request.foot_cleanup
-        return job
+        style = self._style_input(request.style, timer)
+        if isinstance(request, StyleCodeRequest):
+            return StyleCodeJob(style)
+        clip = load_clip(
+            request.content, self.settings, timer, mapping=request.mapping, answer=request.format
+        )
+        return TransferJob(clip.canonical, style, request.strength, request.time_warp,
+                           request.foot_cleanup, clip)  # fmt: skip
 
-    def _style_job(self, style: StyleSource, timer: StageTimer) -> TranslatorJob:
+    def _style_input(self, style: StyleSource, timer: StageTimer) -> StyleInput:
         if style.kind == "style_name":
-            return TranslatorJob(self.code_of_name(style.name))
+            return self.code_of_name(style.name)
         if style.kind == "style_mix":
-            return TranslatorJob(self.code_of_mix(style.mix))
+            return self.code_of_mix(style.mix)
         if style.kind == "keypoints":
             with timer.stage("style_parse"):
-                kp = limits.read_keypoints(
+                return limits.read_keypoints(
                     style.upload.read(), self.settings, fps=style.keypoints_fps
                 )
-            return self._keypoints_job(kp, timer)
         clip = load_clip(style.upload, self.settings, timer, mapping=style.mapping, prefix="style_")
-        return self._motion_job(clip.canonical, timer)
+        return clip.canonical
 
     def _registration_job(
         self, request: RegisterStyleRequest, timer: StageTimer
     ) -> RegistrationJob:
-        """Each clip parsed, mapped, onto the canonical skeleton (a bad clip is its usual
-        problem, its detail naming the clip) and into the style network's input."""
-        clips, frames = [], 0
+        """Each clip parsed, mapped and onto the canonical skeleton; a bad clip is its usual
+        problem, its detail naming the clip."""
+        clips = []
         for k, upload in enumerate(request.clips, 1):
             what = f"clip {k} ({upload.filename or 'unnamed'})"
             try:
@@ -319,113 +245,107 @@ class TranslatorEngine(Engine):
             except Exception as exc:
                 name_the_clip(exc, what)
                 raise
-            clips.append((what, self._motion_job(clip.canonical, timer)))
-            frames += clip.canonical.num_frames
-        return RegistrationJob(request, clips, frames)
+            clips.append((what, clip.canonical))
+        return RegistrationJob(request, clips)
 
-    def _motion_job(self, canon: Motion, timer: StageTimer) -> TranslatorJob:
-        """The style of a canonical clip at 30 fps: its style3d input and velocity factor."""
-        with timer.stage("style_features"):
-            enc = Fe.encode(canon)
-            velocity = Fe.encoded_velocity_factor(enc, canon.fps)
-            x, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
-        return TranslatorJob(None, "style3d", x, velocity)
-
-    def _keypoints_job(self, kp: Keypoints2D, timer: StageTimer) -> TranslatorJob:
-        """The style of a video's keypoints (resampled to 30 fps); no velocity factor (a
-        video's joint speeds are in image units), so no time warp."""
-        with timer.stage("style_features"):
-            features = Fe.style2d_from_keypoints(kp)
-            x, _ = self._padded(Fe.standardize(features, self.stats, "style2d"))
-        return TranslatorJob(None, "style2d", x)
-
-    def _content_job(self, job: TranslatorJob, content: Motion, timer: StageTimer) -> None:
-        with timer.stage("features"):
-            enc = Fe.encode(content)
-            x_content = Fe.restyler_input(enc.content, enc.style3d, self.stats)
-            job.x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
-            job.windows, job.offset, job.length = self._windows(x_content, self.window)
-            job.control = x_content
-        job.content, job.features = content, enc
-
-    def _padded(self, x: np.ndarray) -> tuple[np.ndarray, int]:
-        """``x (F, C)`` standardised -> ``(1, C, T)`` float32 at its bucket, and the offset."""
-        padded, offset = pad_mirrored(x, padded_length(len(x), self.min_frames))
-        return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
-
-    @staticmethod
-    def _windows(x: np.ndarray, length: int) -> tuple[np.ndarray, int, int]:
-        """``x (F, C)`` standardised -> windows ``(N, C, length)`` float32 at
-        :func:`window_starts` (hop half a window), the offset of frame 0 and the length they
-        cover (a clip shorter than a window is mirrored at both ends to one)."""
-        offset = 0
-        if len(x) < length:
-            x, offset = pad_mirrored(x, length)
-        windows = np.stack([x[s : s + length] for s in window_starts(len(x), length)])
-        windows = np.ascontiguousarray(windows.transpose(0, 2, 1), dtype=np.float32)
-        return windows, offset, len(x)
-
-    # --- predict: every network call --------------------------------------------------------
+    # --- predict: the core, canonical in and out ---------------------------------------------
 
     def predict(
-        self, job: TranslatorJob | RegistrationJob, timer: StageTimer
-    ) -> Networks | list[StyleCode]:
-        """The style encoder of a clip or video, then for a transfer the style encoder on
-        the content (its own code, which tells its own speed) and the restyler on the
-        content's windows with the target code; for a registration, each clip's code."""
+        self, job: TransferJob | StyleCodeJob | RegistrationJob, timer: StageTimer
+    ) -> Transfer | StyleCode | list[StyleCode]:
+        """The family's core: a transfer's canonical result, a style input's code (as
+        encoded, bounded; it plays as :meth:`played`), or each registered clip's code."""
         if isinstance(job, RegistrationJob):
             with timer.stage("clip_encode"):
-                return [self.predict(clip, timer).style for _, clip in job.clips]
+                return [self._style_code(motion, timer) for _, motion in job.clips]
+        if isinstance(job, StyleCodeJob):
+            return self._style_code(job.style, timer)
+        return self._transfer(job, timer)
+
+    def _style_code(self, style: StyleInput, timer: StageTimer) -> StyleCode:
+        """A code as given, or the style encoder's code of a canonical clip (with its
+        velocity factor) or of a video's keypoints (none: a video's joint speeds are in
+        image units, so no time warp)."""
+        if isinstance(style, StyleCode):
+            return style
+        with timer.stage("style_features"):
+            if isinstance(style, Keypoints2D):
+                graph, source, velocity = "style2d", "keypoints", None
+                x = Fe.standardize(Fe.style2d_from_keypoints(style), self.stats, "style2d")
+            else:
+                graph, source = "style3d", "style"
+                enc = Fe.encode(style)
+                velocity = Fe.encoded_velocity_factor(enc, style.fps)
+                x = Fe.standardize(enc.style3d, self.stats, "style3d")
+            x, _ = self._padded(x)
         with timer.stage("encode"):
-            style = job.style
-            if style is None:
-                name = self.sessions[job.style_graph].get_inputs()[0].name
-                code = self.run(job.style_graph, {name: job.x_style})[0][0]
-                source = "style" if job.style_graph == "style3d" else "keypoints"
-                style = self._bounded(StyleCode(code, job.style_velocity, source))
-            if job.windows is None:
-                return Networks(style)
-            own = self.run("style3d", {"motion3d": job.x_own})[0][0]
+            name = self.sessions[graph].get_inputs()[0].name
+            code = self.run(graph, {name: x})[0][0]
+        return self._bounded(StyleCode(code, velocity, source))
+
+    def _transfer(self, job: TransferJob, timer: StageTimer) -> Transfer:
+        """The content's features, its own code (which tells its own speed), the restyler
+        with the target code, the finish and the time warp (module docstring)."""
+        style = self._style_code(job.style, timer)
+        content = job.content
+        with timer.stage("features"):
+            enc = Fe.encode(content)
+            control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
+            x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
+        with timer.stage("encode"):
+            own = self.run("style3d", {"motion3d": x_own})[0][0]
         with timer.stage("decode"):
             by_example = style.source in self.example_gains
             played = self.played(style.code, style.source) if by_example else style.code
-            decoded = self._decoded(job.windows, played)
-        return Networks(style, own, decoded)
+            output = self.restyled(control, played)
+        motion = restyled_motion(output, content, enc, self.stats, timer, self.output_smoothing,
+                                 job.strength, job.foot_cleanup)  # fmt: skip
+        warnings = list(style.warnings)
+        factor = 1.0
+        if job.time_warp:
+            with timer.stage("time_warp"):
+                content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
+                speed = style.speed
+                if speed is not None:
+                    speed /= self.own_speed(own)
+                factor, warned = self.warp_factor(
+                    style.velocity, content_velocity, job.strength, speed
+                )
+                warnings += warned
+                if factor != 1.0:
+                    motion = Fe.time_warp(motion, factor)
+        return Transfer(motion, factor, warnings)
 
-    def _decoded(self, windows: np.ndarray, code: np.ndarray) -> np.ndarray:
-        """The restyler on content windows ``(N, C, length)`` for one code, in calls of at
-        most :data:`WINDOWS_PER_CALL` windows."""
-        target = np.asarray(code, dtype=np.float32).reshape(1, -1)
-        decoded = []
-        for i in range(0, len(windows), WINDOWS_PER_CALL):
-            part = windows[i : i + WINDOWS_PER_CALL]
-            codes = np.repeat(target, len(part), 0)
-            decoded.append(self.run("restyler", {"content": part, "style_code": codes})[0])
-        return np.concatenate(decoded)
+    def restyler_input(self, content: Motion) -> np.ndarray:
+        """The restyler's standardised input ``(F, CONTROL_CHANNELS)`` for a canonical clip
+        at 30 fps: with :meth:`restyled`, what the fast networks learn to do, one style
+        each (``training.fast_style``)."""
+        enc = Fe.encode(content)
+        return Fe.restyler_input(enc.content, enc.style3d, self.stats)
 
-    # --- finish ----------------------------------------------------------------------------
+    def restyled(self, control: np.ndarray, code: np.ndarray) -> np.ndarray:
+        """The restyler's blended output ``(F, OUTPUT_CHANNELS)`` for a standardised input
+        ``control (F, CONTROL_CHANNELS)`` and ``code``: windows of the training length, half a
+        window apart (:meth:`_windows`), decoded and blended."""
+        windows, offset, length = self._windows(control, self.window)
+        blended = self._blend(self._decoded(windows, code), length)
+        return blended[offset : offset + len(control)]
+
+    # --- finish: back onto the request's skeleton, or stored -------------------------------
 
     def finish(
         self,
-        job: TranslatorJob | RegistrationJob,
-        out: Networks | list[StyleCode],
+        job: TransferJob | StyleCodeJob | RegistrationJob,
+        out: Transfer | StyleCode | list[StyleCode],
         timer: StageTimer,
     ) -> Result | StyleCodeResult | Registration:
         if isinstance(job, RegistrationJob):
             return self._registered(job, out, timer)
-        if job.content is None:
-            named = out.style.source in ("style_name", "style_mix")
-            return StyleCodeResult(out.style, self.nearest(out.style.code, named=named))
-        result = self._stylized(job, out, timer)
-        return write_result(
-            job.clip,
-            result.motion,
-            self.settings,
-            timer,
-            warnings=out.style.warnings + result.warnings,
-            suffix="transfer",
-            warp=result.warp,
-        )
+        if isinstance(job, StyleCodeJob):
+            named = out.source in ("style_name", "style_mix")
+            return StyleCodeResult(out, self.nearest(out.code, named=named))
+        return write_result(job.clip, out.motion, self.settings, timer, warnings=out.warnings,
+                            suffix="transfer", warp=out.warp)  # fmt: skip
 
     def _registered(
         self, job: RegistrationJob, styles: list[StyleCode], timer: StageTimer
@@ -456,51 +376,35 @@ class TranslatorEngine(Engine):
             self.registered.add(style)
         return Registration(style, self.nearest(style.code), warnings)
 
-    def _stylized(self, job: TranslatorJob, out: Networks, timer: StageTimer) -> Transfer:
-        """The decoded windows -> the canonical result: blended, smoothed, the content's root
-        trajectory, feet on the content's floor, then the time warp (module docstring)."""
-        content, enc = job.content, job.features
-        with timer.stage("rotations"):
-            blended = self._blend(out.decoded, job.length)
-        output = blended[job.offset : job.offset + content.num_frames]
-        motion = restyled_motion(
-            output,
-            content,
-            enc,
-            self.stats,
-            timer,
-            self.output_smoothing,
-            job.strength,
-            job.foot_cleanup,
-        )
-        warnings: list[str] = []
-        factor = 1.0
-        if job.time_warp:
-            with timer.stage("time_warp"):
-                content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
-                speed = out.style.speed
-                if speed is not None:
-                    speed /= self.own_speed(out.own)
-                factor, warnings = self.warp_factor(
-                    out.style.velocity, content_velocity, job.strength, speed
-                )
-                if factor != 1.0:
-                    motion = Fe.time_warp(motion, factor)
-        return Transfer(motion, factor, warnings)
+    # --- networks and style codes ------------------------------------------------------------
 
-    def restyler_input(self, content: Motion) -> np.ndarray:
-        """The restyler's standardised input ``(F, CONTROL_CHANNELS)`` for a canonical clip
-        at 30 fps: with :meth:`restyled`, what the fast networks learn to do, one style
-        each (``training.fast_style``)."""
-        enc = Fe.encode(content)
-        return Fe.restyler_input(enc.content, enc.style3d, self.stats)
+    def _padded(self, x: np.ndarray) -> tuple[np.ndarray, int]:
+        """``x (F, C)`` standardised -> ``(1, C, T)`` float32 at its bucket, and the offset."""
+        padded, offset = pad_mirrored(x, padded_length(len(x), self.min_frames))
+        return np.ascontiguousarray(padded.T[None], dtype=np.float32), offset
 
-    def restyled(self, control: np.ndarray, code: np.ndarray) -> np.ndarray:
-        """The restyler's blended output ``(F, OUTPUT_CHANNELS)`` for a standardised input
-        ``control (F, CONTROL_CHANNELS)`` and ``code``, run as :meth:`predict` runs it."""
-        windows, offset, length = self._windows(control, self.window)
-        blended = self._blend(self._decoded(windows, code), length)
-        return blended[offset : offset + len(control)]
+    @staticmethod
+    def _windows(x: np.ndarray, length: int) -> tuple[np.ndarray, int, int]:
+        """``x (F, C)`` standardised -> windows ``(N, C, length)`` float32 at
+        :func:`window_starts` (hop half a window), the offset of frame 0 and the length they
+        cover (a clip shorter than a window is mirrored at both ends to one)."""
+        offset = 0
+        if len(x) < length:
+            x, offset = pad_mirrored(x, length)
+        windows = np.stack([x[s : s + length] for s in window_starts(len(x), length)])
+        windows = np.ascontiguousarray(windows.transpose(0, 2, 1), dtype=np.float32)
+        return windows, offset, len(x)
+
+    def _decoded(self, windows: np.ndarray, code: np.ndarray) -> np.ndarray:
+        """The restyler on content windows ``(N, C, length)`` for one code, in calls of at
+        most :data:`WINDOWS_PER_CALL` windows."""
+        target = np.asarray(code, dtype=np.float32).reshape(1, -1)
+        decoded = []
+        for i in range(0, len(windows), WINDOWS_PER_CALL):
+            part = windows[i : i + WINDOWS_PER_CALL]
+            codes = np.repeat(target, len(part), 0)
+            decoded.append(self.run("restyler", {"content": part, "style_code": codes})[0])
+        return np.concatenate(decoded)
 
     @staticmethod
     def _blend(windows: np.ndarray, frames: int) -> np.ndarray:
@@ -512,8 +416,6 @@ class TranslatorEngine(Engine):
         out, total = kernels.overlap_add(windows, starts, weight, frames)
         total = total[:, None]
         return (out / total).astype(np.float32)
-
-    # --- style codes -----------------------------------------------------------------------
 
     def _bounded(self, style: StyleCode) -> StyleCode:
         """``style`` with its code scaled down to ``max_code_norm`` (and a warning) when
@@ -563,18 +465,6 @@ class TranslatorEngine(Engine):
         centre = self.codes.mean(axis=0)
         return exaggerated(np.asarray(code)[None], [gain], centre)[0]
 
-    def code_of_motion(self, canon: Motion, timer: StageTimer | None = None) -> StyleCode:
-        """The 3D style code (as encoded; it plays as :meth:`played`) and velocity factor
-        of a canonical clip at 30 fps."""
-        timer = timer or StageTimer(self.name)
-        return self.predict(self._motion_job(canon, timer), timer).style
-
-    def code_of_keypoints(self, kp: Keypoints2D, timer: StageTimer | None = None) -> StyleCode:
-        """The 2D style code of a video's keypoints (as encoded; it plays as :meth:`played`;
-        no velocity factor)."""
-        timer = timer or StageTimer(self.name)
-        return self.predict(self._keypoints_job(kp, timer), timer).style
-
     def nearest(
         self, code: np.ndarray, count: int = NEAREST, named: bool = False
     ) -> list[dict[str, Any]]:
@@ -599,8 +489,6 @@ class TranslatorEngine(Engine):
         near, far = SAME_STYLE_NEAR * self.style_gap, SAME_STYLE_FAR * self.style_gap
         weight = min(max((far - float(distances[i])) / (far - near), 0.0), 1.0)
         return float(self.speed[i] ** weight)
-
-    # --- transfer --------------------------------------------------------------------------
 
     def warp_factor(
         self,
@@ -627,31 +515,6 @@ class TranslatorEngine(Engine):
                 f"(allowed {MIN_WARP:g} to {MAX_WARP:g})"
             ]
         return factor, []
-
-    def transfer(
-        self,
-        content: Motion,
-        code: np.ndarray,
-        strength: float = 1.0,
-        time_warp: bool = True,
-        foot_cleanup: bool = True,
-        style_velocity: float | None = None,
-        timer: StageTimer | None = None,
-        style_speed: float | None = None,
-        source: str = "code",
-    ) -> Transfer:
-        """``content`` (canonical, 30 fps) in the style of ``code (S,)``, canonical out: the
-        three steps without uploads, for the evaluations. The time warp is ``style_speed``
-        over the content's :meth:`own_speed` (named styles) or the ratio of velocity factors
-        (style clips); neither means no time warp (with a warning if asked). ``source``
-        "style" or "keypoints": ``code`` is a style clip's or a video's as encoded, and
-        plays as :meth:`predict` plays those (:meth:`played`); else it plays as given."""
-        timer = timer or StageTimer(self.name)
-        style = StyleCode(np.asarray(code, np.float32), style_velocity, source, speed=style_speed)
-        job = TranslatorJob(style, strength=strength, time_warp=time_warp)
-        job.foot_cleanup = foot_cleanup
-        self._content_job(job, content, timer)
-        return self._stylized(job, self.predict(job, timer), timer)
 
 
 register_engine("translator", TranslatorEngine)

@@ -10,7 +10,7 @@ import pytest
 
 from motion import bvh
 from service.config import Settings
-from service.engines.translator import MAX_WARP, MIN_WARP
+from service.engines.restyling import MAX_WARP, MIN_WARP
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
 from tests.rigs import FIXTURE
@@ -207,6 +207,7 @@ def test_the_other_names_of_a_style_give_the_same_result(shared_client, walk):
 def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, walk):
     """Each end of a clip is mirrored over as many frames as the bundle says its networks
     see: fewer and its first and last frames would read zeros."""
+    from motion import features as Fe
     from service.clips import Upload
     from service.metrics import StageTimer
     from service.requests import StylizeRequest
@@ -217,9 +218,9 @@ def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, wa
         engine = shared_client.app.state.registry.engine_for("fast", request)
         reach = int(engine.entry.extra["receptive_field"])
         job = engine.prepare(request, StageTimer(engine.name))
-        clip_frames = job.canon.num_frames
-        assert job.offset >= reach, frames
-        assert job.x.shape[2] - job.offset - clip_frames >= reach, frames
+        x, offset = engine.network_input(Fe.encode(job.content))
+        assert offset >= reach, frames
+        assert x.shape[2] - offset - job.content.num_frames >= reach, frames
 
 
 def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):

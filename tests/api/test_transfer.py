@@ -18,19 +18,19 @@ from motion import contacts as CT
 from motion import features as Fe
 from motion import kinematics as K
 from service.config import Settings
+from service.engines.restyling import BUCKET, MAX_WARP, MIN_WARP, pad_mirrored, padded_length
 from service.engines.translator import (
-    BUCKET,
     CODE_NORM_LIMIT,
-    MAX_WARP,
-    MIN_WARP,
     SAME_STYLE_FAR,
     SAME_STYLE_NEAR,
+    StyleCodeJob,
+    TransferJob,
     TranslatorEngine,
-    pad_mirrored,
-    padded_length,
     window_starts,
 )
 from service.errors import InvalidRequest
+from service.metrics import StageTimer
+from service.requests import StyleCode
 from service.routes.fields import parse_mix
 from tests import rigs
 from tests.api.helpers import assert_problem
@@ -152,6 +152,12 @@ def own_speed(client, clip: bytes) -> float:
 
 
 # --------------------------------------------------------------------------- engine helpers
+
+
+def restyle(engine, content, style, **options):
+    """The translator's core on canonical ``content`` in ``style`` (a code, a clip or
+    keypoints): the canonical motion it returns."""
+    return engine.predict(TransferJob(content, style, **options), StageTimer(engine.name)).motion
 
 
 def test_padding_buckets_and_mirroring():
@@ -411,8 +417,8 @@ def test_decoder_jitter_is_smoothed_away(engine, walk):
 
     ratios = []
     for name in STYLES:
-        out = engine.transfer(content, engine.code_of_name(name).code, time_warp=False)
-        ratios.append(jitter(out.motion) / jitter(content))
+        out = restyle(engine, content, engine.code_of_name(name), time_warp=False)
+        ratios.append(jitter(out) / jitter(content))
     assert np.mean(ratios) < 2.0, np.round(ratios, 2)
 
 
@@ -427,12 +433,12 @@ def test_a_frame_depends_on_nearby_frames_only(engine, walk):
     walk = retarget.to_canonical(bvh.loads(walk))
     content = walk.replace(lrot=there_and_back(walk.lrot), lpos=there_and_back(walk.lpos))
     longer = content.replace(lrot=there_and_back(content.lrot), lpos=there_and_back(content.lpos))
-    code = engine.code_of_name(STYLES[0]).code
+    code = engine.code_of_name(STYLES[0])
     # frames before the clip's last window, less the output smoothing's reach (4 sigma)
     kept = window_starts(content.num_frames, WINDOW)[-1] - int(4 * engine.output_smoothing)
     assert kept >= WINDOW // 2
-    a = engine.transfer(content, code, time_warp=False, foot_cleanup=False).motion
-    b = engine.transfer(longer, code, time_warp=False, foot_cleanup=False).motion
+    a = restyle(engine, content, code, time_warp=False, foot_cleanup=False)
+    b = restyle(engine, longer, code, time_warp=False, foot_cleanup=False)
     np.testing.assert_allclose(b.lrot[:kept], a.lrot[:kept], atol=1e-4)
 
 
@@ -443,31 +449,25 @@ def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, wal
     reports) plays the manifest's ``clip_style_gain`` or ``video_style_gain`` times as far
     from the centre of the learned codes, as a name's is taken out: the restyler decodes
     that code, not the encoded one."""
-    from service.metrics import StageTimer
-
     content = retarget.to_canonical(bvh.loads(walk))
     style = content.replace(lrot=content.lrot[::-1].copy(), lpos=content.lpos[::-1].copy())
-    timer = StageTimer(engine.name)
     kp = Fe.keypoints_of_positions(K.global_positions(style), yaw=0.6)
-    job, encoded, source, gain_name = {
-        "clip": (engine._motion_job(style, timer), engine.code_of_motion(style), "style", "clip"),
-        "video": (
-            engine._keypoints_job(kp, timer),
-            engine.code_of_keypoints(kp),
-            "keypoints",
-            "video",
-        ),
+    example, source, gain_name = {
+        "clip": (style, "style", "clip"),
+        "video": (kp, "keypoints", "video"),
     }[example]
     gain = engine.example_gains[source]
     assert gain == ENTRY["extra"][f"{gain_name}_style_gain"]
-    engine._content_job(job, content, timer)
-    out = engine.predict(job, timer)
-    assert out.style.source == source and gain > 1
-    np.testing.assert_array_equal(out.style.code, encoded.code)
+    encoded = engine.predict(StyleCodeJob(example), StageTimer(engine.name))
+    assert encoded.source == source and gain > 1
     centre = engine.codes.mean(axis=0)
-    taken_out = centre + gain * (out.style.code - centre)
-    np.testing.assert_allclose(out.decoded, engine._decoded(job.windows, taken_out), atol=1e-4)
-    assert np.abs(out.decoded - engine._decoded(job.windows, out.style.code)).max() > 0.05
+    taken_out = (centre + gain * (encoded.code - centre)).astype(np.float32)
+    options = {"time_warp": False, "foot_cleanup": False}
+    played = restyle(engine, content, example, **options)
+    as_taken_out = restyle(engine, content, StyleCode(taken_out, None, "code"), **options)
+    as_encoded = restyle(engine, content, StyleCode(encoded.code, None, "code"), **options)
+    np.testing.assert_allclose(played.lrot, as_taken_out.lrot, atol=1e-4)
+    assert np.abs(played.lrot - as_encoded.lrot).max() > 1e-2
 
 
 @needs_model
@@ -475,11 +475,11 @@ def test_strength_zero_gives_the_content_back(engine, walk):
     """Strength 0 keeps the content's pose (rotations and hips height) frame for frame; half
     way lands between it and the full style."""
     content = retarget.to_canonical(bvh.loads(walk))
-    code = engine.code_of_name("elderly").code
+    code = engine.code_of_name("elderly")
 
     def restyled(strength: float):
-        out = engine.transfer(content, code, strength=strength, time_warp=False, foot_cleanup=False)
-        return Fe.encode(out.motion).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
+        out = restyle(engine, content, code, strength=strength, time_warp=False, foot_cleanup=False)
+        return Fe.encode(out).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
 
     own = Fe.encode(content).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
     assert np.abs(restyled(0.0) - own).max() < 0.05  # cm

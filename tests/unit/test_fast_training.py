@@ -108,23 +108,23 @@ def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
 
 def test_the_targets_are_what_a_transfer_decodes():
     """The fast networks learn ``restyled(restyler_input(clip))``: exactly the restyler's
-    blended output the translator's own transfer path makes for the clip and code."""
+    blended output that the translator's core finishes into its transfer of the clip."""
     from motion import bvh, retarget
-    from service.engines.translator import TranslatorJob
+    from motion import features as Fe
+    from service.engines.restyling import restyled_motion
+    from service.engines.translator import TransferJob
     from service.metrics import StageTimer
-    from service.requests import StyleCode
     from tests.rigs import FIXTURE
     from training.judges import load_engine
 
     engine = load_engine("translator")[0]
     clip = retarget.to_canonical(bvh.load(FIXTURE))
-    code = engine.code_of_name("angry").code
-    job = TranslatorJob(StyleCode(np.asarray(code, dtype=np.float32), None, "style_name"))
+    style = engine.code_of_name("angry")
     timer = StageTimer(engine.name)
-    engine._content_job(job, clip, timer)
-    decoded = engine._blend(engine.predict(job, timer).decoded, job.length)
-    control = engine.restyler_input(clip)
-    np.testing.assert_array_equal(control, job.control)
-    np.testing.assert_array_equal(
-        engine.restyled(control, code), decoded[job.offset : job.offset + clip.num_frames]
+    job = TransferJob(clip, style, time_warp=False)
+    transferred = engine.predict(job, timer).motion
+    target = engine.restyled(engine.restyler_input(clip), style.code)
+    finished = restyled_motion(
+        target, clip, Fe.encode(clip), engine.stats, timer, engine.output_smoothing
     )
+    np.testing.assert_array_equal(finished.lrot, transferred.lrot)
