@@ -3,16 +3,18 @@ result back onto the request's own skeleton and format. No HTTP here: the routes
 :class:`Upload` objects over, the engines call :func:`load_clip` in ``prepare`` and
 :func:`write_result` in ``finish`` (both blocking: the inference pool runs them).
 
-A clip is BVH or glTF (a ``.glb``, or ``.gltf`` with embedded buffers), told apart by its
-bytes (:func:`motion.gltf.is_gltf`), whatever media type it came with. The answer comes in
-the clip's format unless ``?format=`` asks for another (:func:`answer_format`): a GLB answer
-is the file that was sent with the new animation in place of its old one
-(:meth:`motion.gltf.GltfFile.write`); ``json`` carries the result as BVH text on the rig that
-was read.
+A clip is BVH, glTF (a ``.glb``, or ``.gltf`` with embedded buffers) or FBX (with the
+``fbx`` extra: :mod:`service.fbx`), told apart by its bytes (:func:`motion.gltf.is_gltf`,
+:func:`service.fbx.is_fbx`), whatever media type it came with. The answer comes in the clip's
+format unless ``?format=`` asks for another (:func:`answer_format`): a GLB or FBX answer is
+the file that was sent with the new animation in place of its old one
+(:meth:`motion.gltf.GltfFile.write`, :meth:`service.fbx.FbxFile.write`); ``json`` carries the
+result as BVH text on the rig that was read.
 
 Errors: a malformed BVH is a 400 problem with ``line``, a malformed glTF a 400; more than
 ``max_frames`` frames (in or out) a 413 with ``limit``; a skeleton that cannot be mapped a
-422 with ``unmapped``; ``format=glb`` without a glTF file to write into a 400.
+422 with ``unmapped``; ``format=glb`` (``fbx``) without a glTF (FBX) file to write into a
+400; an FBX where the ``fbx`` extra is not installed a 415 saying how to enable it.
 """
 
 from __future__ import annotations
@@ -26,11 +28,11 @@ from motion import canonical as C
 from motion.errors import MotionError
 from motion.features import time_warp
 from motion.skeleton import Motion
-from service import limits, metrics
+from service import fbx, limits, metrics
 from service.config import Settings
 from service.errors import InvalidRequest, PayloadTooLarge
 
-Format = Literal["bvh", "glb", "json"]
+Format = Literal["bvh", "glb", "fbx", "json"]
 
 
 @dataclass
@@ -60,33 +62,50 @@ class Upload:
 @dataclass
 class Clip:
     """An uploaded clip: as sent (``original``), its rig, and on the canonical skeleton at
-    30 fps (``canonical``); for a glTF file the parsed file (``gltf``, to write the answer
-    into); the format the answer is written in (``answer``: bvh, glb or json)."""
+    30 fps (``canonical``); for a glTF or FBX file the parsed file (``file``, to write the
+    answer into); the format the answer is written in (``answer``: bvh, glb, fbx or json)."""
 
     original: Motion
     rig: retarget.Rig
     canonical: Motion
-    gltf: gltf.GltfFile | None = None
+    file: gltf.GltfFile | fbx.FbxFile | None = None
     answer: str = "bvh"
 
     @property
     def format(self) -> str:
-        """The clip's own format: ``glb`` for a glTF file (GLB or embedded .gltf), else
-        ``bvh``."""
-        return "bvh" if self.gltf is None else "glb"
+        """The clip's own format: ``glb`` for a glTF file (GLB or embedded .gltf), ``fbx``
+        for an FBX, else ``bvh``."""
+        return file_format(self.file)
+
+
+def file_format(parsed: gltf.GltfFile | fbx.FbxFile | None) -> str:
+    if parsed is None:
+        return "bvh"
+    return "fbx" if isinstance(parsed, fbx.FbxFile) else "glb"
+
+
+FILE_FORMATS = {"glb": "glTF", "fbx": "FBX"}  # formats written into the file sent
+_FORMAT_NAMES = {"bvh": "BVH", **FILE_FORMATS}
 
 
 def answer_format(clip_format: str | None, requested: str | None) -> str:
     """The format an answer is written in: ``requested`` (``?format=``), else the clip's own
-    format (``clip_format``: bvh or glb), BVH without a clip (None). ``glb`` needs a glTF
-    clip to carry the animation (a BVH has no mesh or skin to put it in): 400 otherwise."""
+    format (``clip_format``: bvh, glb or fbx), BVH without a clip (None). ``glb`` and ``fbx``
+    need a clip of that format to carry the animation (a BVH has no mesh or skin to put it
+    in, and one format is not converted into the other): 400 otherwise."""
     if requested is None:
         return clip_format or "bvh"
-    if requested == "glb" and clip_format != "glb":
-        what = "no glTF file was sent" if clip_format is None else "the clip is BVH"
+    if requested in FILE_FORMATS and clip_format != requested:
+        kind = FILE_FORMATS[requested]
+        what = (
+            f"no {kind} file was sent"
+            if clip_format is None
+            else f"the clip is {_FORMAT_NAMES[clip_format]}"
+        )
+        send = "as .glb (or .gltf with embedded buffers)" if requested == "glb" else "as .fbx"
         raise InvalidRequest(
-            f"format=glb writes the new animation into the glTF file sent, and {what}: send "
-            "the character as .glb (or .gltf with embedded buffers), or ask for bvh or json",
+            f"format={requested} writes the new animation into the {kind} file sent, and "
+            f"{what}: send the character {send}, or ask for bvh or json",
             field="format",
         )
     return requested
@@ -94,17 +113,27 @@ def answer_format(clip_format: str | None, requested: str | None) -> str:
 
 def read_motion(
     source: Upload, settings: Settings, *, rest_if_unanimated: bool = False
-) -> tuple[Motion, gltf.GltfFile | None]:
-    """The motion of an upload, BVH or glTF as its bytes say, and the parsed glTF file (None
-    for a BVH). A glTF animation over ``max_frames`` is refused before it is sampled (413);
-    with ``rest_if_unanimated`` a glTF rig without animation reads as its rest pose."""
+) -> tuple[Motion, gltf.GltfFile | fbx.FbxFile | None]:
+    """The motion of an upload, BVH, glTF or FBX as its bytes say, and the parsed glTF or
+    FBX file (None for a BVH). An animation over ``max_frames`` is refused before it is
+    sampled (413); with ``rest_if_unanimated`` a rig without animation reads as its rest
+    pose."""
     data = source.read()
-    if not gltf.is_gltf(data):
-        return bvh.loads(data), None
     try:
-        parsed = gltf.read(
-            data, max_frames=settings.max_frames, rest_if_unanimated=rest_if_unanimated
-        )
+        if fbx.is_fbx(data):
+            parsed = fbx.read(
+                data,
+                workers=settings.fbx_workers,
+                timeout=settings.request_timeout_s,
+                max_frames=settings.max_frames,
+                rest_if_unanimated=rest_if_unanimated,
+            )
+        elif gltf.is_gltf(data):
+            parsed = gltf.read(
+                data, max_frames=settings.max_frames, rest_if_unanimated=rest_if_unanimated
+            )
+        else:
+            return bvh.loads(data), None
     except MotionError as exc:
         if exc.kind != "too-large":
             raise
@@ -134,7 +163,7 @@ def load_clip(
     with timer.stage(prefix + "parse"):
         original, parsed = read_motion(source, settings, rest_if_unanimated=rest_if_unanimated)
     limits.check_frames(original, settings, what=what)
-    answer = answer_format("bvh" if parsed is None else "glb", answer)
+    answer = answer_format(file_format(parsed), answer)
     with timer.stage(prefix + "retarget"):
         rig = retarget.make_rig(original.skeleton, original, mapping=mapping)
         canonical = retarget.to_canonical(original, rig, fps=C.FPS)
@@ -144,8 +173,9 @@ def load_clip(
 
 @dataclass
 class Result:
-    """A finished request: the answer's ``format`` (bvh, glb or json) and its body (``bvh``
-    text for bvh and json, ``glb`` bytes), frames and rate, warnings, the format of the
+    """A finished request: the answer's ``format`` (bvh, glb, fbx or json) and its body
+    (``bvh`` text for bvh and json, ``binary`` GLB or FBX bytes), frames and rate, warnings,
+    the format of the
     clip it is on (``source_format``), and (set by the data plane) the model and the stage
     timings."""
 
@@ -158,7 +188,7 @@ class Result:
     model: tuple[str, str] = ("", "")
     timer: metrics.StageTimer | None = None
     format: str = "bvh"
-    glb: bytes | None = None
+    binary: bytes | None = None
     source_format: str = "bvh"
 
 
@@ -181,7 +211,7 @@ def write_result(
     canonical skeleton lacks follow the new timing; else at the canonical motion's timing),
     or left canonical without a clip; at ``fps`` when given; 413 over ``max_frames``.
     Written in ``clip.answer`` (the format ``fmt`` for no clip): BVH text, or the clip's
-    glTF file with the result as its animation."""
+    glTF or FBX file with the result as its animation."""
     answer = clip.answer if clip is not None else answer_format(None, fmt)
     if clip is not None and warp != 1.0:
         with timer.stage("time_warp"):
@@ -198,16 +228,16 @@ def write_result(
     if fps is not None:
         out = out.replace(fps=float(fps))
     limits.check_frames(out, settings, what="result")
-    text, glb = "", None
+    text, binary = "", None
     with timer.stage("write"):
-        if answer == "glb":
-            glb = clip.gltf.write(out)
+        if answer in FILE_FORMATS:
+            binary = clip.file.write(out)
         else:
             text = bvh.dumps(out)
     rig = clip.rig.report() if clip is not None else None
     source = clip.format if clip is not None else "bvh"
     return Result(text, out.num_frames, float(out.fps), list(warnings), suffix, rig,
-                  format=answer, glb=glb, source_format=source)  # fmt: skip
+                  format=answer, binary=binary, source_format=source)  # fmt: skip
 
 
 def name_the_clip(exc: Exception, what: str) -> None:

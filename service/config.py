@@ -73,6 +73,13 @@ class Settings(BaseSettings):
         description="onnxruntime intra-op threads per session; default cores // workers",
     )
 
+    fbx_workers: int = Field(
+        default_factory=lambda data: min(2, _per_worker_cores(data)),
+        ge=0,
+        description="Blender processes reading and writing FBX per worker (the fbx extra); "
+        "0: FBX is refused (415); default min(2, cores // workers)",
+    )
+
     styles_dir: Path = Field(
         Path("styles"),
         description="folder of the registered styles (POST /v1/styles), relative to the "

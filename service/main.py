@@ -7,12 +7,13 @@ uvicorn calls the factory itself: ``uvicorn service.main:create_app --factory``.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import AsyncIterator, Mapping
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from service import auth, metrics
+from service import auth, fbx, metrics
 from service.config import Settings, available_cpus
 from service.dataplane import DataPlane
 from service.engines import EngineFactory, import_family_engines
@@ -46,6 +47,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     auth.log_startup(settings)
     app.state.runner.start()
     app.state.registry.start()
+    if settings.fbx_workers and fbx.installed():  # warm Blender before the first FBX
+        threading.Thread(
+            target=fbx.start, args=(settings.fbx_workers,), name="blender-start", daemon=True
+        ).start()
     try:
         yield
     finally:

@@ -1,4 +1,4 @@
-"""HTTP answers of the data plane's results: a clip as a BVH or GLB attachment, or as a JSON
+"""HTTP answers of the data plane's results: a clip as a BVH, GLB or FBX attachment, or as a JSON
 object with ``?format=json``, with the headers every inference answer carries."""
 
 from __future__ import annotations
@@ -10,19 +10,25 @@ from typing import Any
 from fastapi import Request
 from fastapi.responses import JSONResponse, Response
 
-from service.clips import Result
+from service.clips import FILE_FORMATS, Result
 from service.errors import problem_responses
 
 BVH_MEDIA_TYPE = "text/plain; charset=utf-8"
 GLB_MEDIA_TYPE = "model/gltf-binary"
+FBX_MEDIA_TYPE = "application/octet-stream"  # FBX has no registered media type
 
 
 def clip_responses(description: str) -> dict:
-    """OpenAPI ``responses`` of a route that answers BVH or GLB (or JSON with
+    """OpenAPI ``responses`` of a route that answers BVH, GLB or FBX (or JSON with
     ``?format=json``)."""
     return {
         200: {
-            "content": {"text/plain": {}, GLB_MEDIA_TYPE: {}, "application/json": {}},
+            "content": {
+                "text/plain": {},
+                GLB_MEDIA_TYPE: {},
+                FBX_MEDIA_TYPE: {},
+                "application/json": {},
+            },
             "description": description,
         },
         **problem_responses(400, 404, 413, 415, 422, 503, 504),
@@ -55,8 +61,8 @@ def timings_ms(result: Any) -> dict[str, float]:
 
 
 def respond(result: Result, *, upload_name: str | None = None) -> Response:
-    """The answer in ``result.format``: BVH as a ``text/plain`` attachment, or GLB as a
-    ``model/gltf-binary`` one, with ``X-Model-Version``, ``X-Frames``, ``X-Fps`` and
+    """The answer in ``result.format``: BVH as a ``text/plain`` attachment, GLB as a
+    ``model/gltf-binary`` one or FBX as an ``application/octet-stream`` one, with ``X-Model-Version``, ``X-Frames``, ``X-Fps`` and
     ``Server-Timing`` (``X-Request-Id`` is the middleware's); or for ``json`` the object
     ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings", "source_format"}`` (and
     ``rig``; same headers)."""
@@ -79,10 +85,11 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
         if result.rig is not None:
             body["rig"] = result.rig
         return JSONResponse(body, headers=headers)
-    if result.format == "glb":
-        filename = _filename(upload_name, result.suffix, "glb")
+    if result.format in FILE_FORMATS:
+        filename = _filename(upload_name, result.suffix, result.format)
         headers["Content-Disposition"] = f'attachment; filename="{filename}"'
-        return Response(result.glb, media_type=GLB_MEDIA_TYPE, headers=headers)
+        media_type = GLB_MEDIA_TYPE if result.format == "glb" else FBX_MEDIA_TYPE
+        return Response(result.binary, media_type=media_type, headers=headers)
     filename = _filename(upload_name, result.suffix)
     headers["Content-Disposition"] = f'attachment; filename="{filename}"'
     return Response(result.bvh, media_type=BVH_MEDIA_TYPE, headers=headers)

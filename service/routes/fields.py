@@ -20,8 +20,11 @@ from service.errors import InvalidRequest, PayloadTooLarge, UnsupportedMediaType
 # Media types a BVH upload may carry (clients label text files in many ways).
 TEXT_TYPES = ("text/", "application/octet-stream", "application/x-bvh", "application/bvh")
 # ... and a clip, which may be glTF (the bytes decide which)
-CLIP_TYPES = (*TEXT_TYPES, "model/gltf-binary", "model/gltf+json", "application/json")
-CLIP_WHAT = "a BVH or glTF (.glb) file"
+CLIP_TYPES = (
+    *TEXT_TYPES, "model/gltf-binary", "model/gltf+json", "application/json",
+    "application/vnd.autodesk.fbx", "model/fbx", "model/vnd.fbx",
+)  # fmt: skip
+CLIP_WHAT = "a BVH, glTF (.glb) or FBX file"
 
 MappingField = Annotated[
     str | None,
@@ -33,9 +36,9 @@ MappingField = Annotated[
 FormatQuery = Annotated[
     Format | None,
     Query(
-        description="answer format; default the clip's own (BVH or GLB). glb needs a glTF "
-        "clip to write into; json gives the result as BVH text with frames, rate, model, "
-        "timings, warnings, rig"
+        description="answer format; default the clip's own (BVH, GLB or FBX). glb and fbx "
+        "need a clip in that format to write into; json gives the result as BVH text with "
+        "frames, rate, model, timings, warnings, rig"
     ),
 ]
 
