@@ -31,7 +31,7 @@ from pathlib import Path
 import httpx
 from tqdm import tqdm
 
-CLIP_SUFFIXES = (".bvh", ".glb", ".gltf")
+CLIP_SUFFIXES = (".bvh", ".glb", ".gltf", ".fbx")
 AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 RETRY_STATUSES = (429, 503)
 API_KEY_ENV = "MOTION_API_KEY"
@@ -45,11 +45,24 @@ MEDIA_TYPES = {
     ".bvh": "application/octet-stream",
     ".glb": "model/gltf-binary",
     ".gltf": "model/gltf+json",
+    ".fbx": "application/octet-stream",
     ".wav": "audio/wav",
     ".flac": "audio/flac",
     ".ogg": "audio/ogg",
     ".mp3": "audio/mpeg",
 }
+
+
+def answer_suffix(response: httpx.Response, fallback: str) -> str:
+    """The extension of an answer: its Content-Disposition file name's (an FBX answer is
+    ``application/octet-stream``), else its media type's, else ``fallback``."""
+    disposition = response.headers.get("content-disposition", "")
+    _, _, name = disposition.partition('filename="')
+    suffix = Path(name.rstrip('"')).suffix.lower()
+    if suffix in (*CLIP_SUFFIXES, ".json"):
+        return suffix
+    media_type = response.headers.get("content-type", "").split(";")[0].strip()
+    return EXTENSIONS.get(media_type, fallback)
 
 
 @dataclass
@@ -173,8 +186,7 @@ async def run_one(
             elif response.status_code == 401:
                 outcome.error += f" (give a key with --api-key or {API_KEY_ENV})"
             return outcome
-        media_type = response.headers.get("content-type", "").split(";")[0].strip()
-        suffix = EXTENSIONS.get(media_type, job.source.suffix or ".out")
+        suffix = answer_suffix(response, job.source.suffix or ".out")
         target = job.target.with_name(job.target.name + suffix)
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -254,21 +266,21 @@ def parser() -> argparse.ArgumentParser:
             "--max-wait", type=float, default=60.0, help="longest Retry-After honoured, s (60)"
         )
         sub.add_argument("--timeout", type=float, default=300.0, help="per request, s (300)")
-        sub.add_argument("--format", choices=("bvh", "glb", "json"), help="answer format")
+        sub.add_argument("--format", choices=("bvh", "glb", "fbx", "json"), help="answer format")
         sub.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
     transfer = commands.add_parser("transfer", help="the translator: any named style")
-    common(transfer, "BVH or GLB")
+    common(transfer, "BVH, GLB or FBX")
     transfer.add_argument("--style", required=True, help="style name (GET /v1/styles)")
     transfer.add_argument("--strength", type=float, default=1.0, help="0..1 (1)")
     transfer.add_argument("--mapping", help="JSON joint-name map for rigs not mapped by name")
     stylize = commands.add_parser("stylize", help="the fast per-style networks")
-    common(stylize, "BVH or GLB")
+    common(stylize, "BVH, GLB or FBX")
     stylize.add_argument("--style", required=True, help="style name (GET /v1/styles)")
     dance = commands.add_parser("dance", help="a dance for each song")
     common(dance, "audio (wav, flac, ogg, mp3)")
     dance.add_argument("--genre", help="dance genre; predicted when absent")
-    dance.add_argument("--skeleton", help="BVH or GLB rig to dance on")
+    dance.add_argument("--skeleton", help="BVH, GLB or FBX rig to dance on")
     dance.add_argument("--fps", type=float, default=30.0, help="frame rate (30)")
     dance.add_argument("--seed", type=int, help="random seed")
     return top

@@ -191,3 +191,23 @@ def test_bad_arguments_and_missing_inputs(server, tmp_path):
     result = motion_style("transfer", str(clip), "--style", "no-such-style",
                           "--url", server.url, "-o", str(tmp_path / "out"))  # fmt: skip
     assert result.returncode == 1 and "walk.bvh: 404" in result.stderr
+
+
+def test_fbx_files_go_through_and_come_back_as_fbx(server, tmp_path):
+    from tests.fbx_files import make_fbx_files
+    from tests.rigs import FIXTURE
+
+    made = make_fbx_files(FIXTURE, tmp_path)
+    result = motion_style("stylize", str(made["character"]), "--style", "angry",
+                          "--url", server.url, "-o", str(tmp_path / "fast"), "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    answer = tmp_path / "fast" / "character.fbx"
+    assert answer.read_bytes().startswith(b"Kaydara FBX Binary")
+
+    songs = tmp_path / "songs"
+    songs.mkdir()
+    soundfile.write(songs / "song.wav", song(2.0), SR)
+    result = motion_style("dance", str(songs), "--skeleton", str(made["bare"]),
+                          "--url", server.url, "-o", str(tmp_path / "dance"))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "dance" / "song.fbx").read_bytes().startswith(b"Kaydara FBX Binary")
