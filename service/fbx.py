@@ -42,8 +42,8 @@ FBX_MAGIC = b"Kaydara FBX Binary  \x00"
 ENABLE = (
     "FBX is read and written by Blender as a Python module, which this service does not "
     "have: install the fbx extra (pip install 'motion-style[fbx]', bpy 4.2 on CPython "
-    "3.11) or run the motion-style:fbx image, with fbx_workers (MOTION_FBX_WORKERS) >= 1; "
-    "or send the character as .glb or .bvh"
+    "3.11) and keep fbx_workers (MOTION_FBX_WORKERS) >= 1; or send the character as .glb "
+    "or .bvh"
 )
 START_TIMEOUT_S = 120.0
 

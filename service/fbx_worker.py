@@ -19,6 +19,7 @@ file it has just read does not import it again.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import sys
@@ -249,7 +250,10 @@ def write(data: bytes, location: np.ndarray, rotation: np.ndarray, fps: float) -
     for m in modifiers:
         m.show_viewport = False
     try:
-        with tempfile.TemporaryDirectory(prefix="motion-fbx-") as folder:
+        with (
+            tempfile.TemporaryDirectory(prefix="motion-fbx-") as folder,
+            _bones_baked_from(arm, _fbx_locals(bones, location, rotation), start),
+        ):
             path = os.path.join(folder, "answer.fbx")
             bpy.ops.export_scene.fbx(
                 filepath=path,
@@ -269,6 +273,79 @@ def write(data: bytes, location: np.ndarray, rotation: np.ndarray, fps: float) -
 
 
 _LINEAR = 1  # KeyframePoint.interpolation: CONSTANT, LINEAR, BEZIER, ...
+
+
+def _fbx_locals(bones, location: np.ndarray, rotation: np.ndarray) -> dict[str, tuple]:
+    """Each bone's transform in its FBX parent's space, frame by frame, as Blender's exporter
+    computes it (``parent_pose^-1 @ pose``, with the bone axes it keeps by default), from the
+    keyed ``matrix_basis``: ``parent_rest^-1 @ rest @ basis``. Name -> (location (F, 3),
+    XYZ Euler angles in radians, continuous from frame to frame (F, 3))."""
+    from scipy.spatial.transform import Rotation
+
+    rest = np.array([_matrix(b.matrix_local) for b in bones])
+    index = {b.name: k for k, b in enumerate(bones)}
+    relative = rest.copy()
+    for k, bone in enumerate(bones):
+        if bone.parent is not None:
+            relative[k] = np.linalg.inv(rest[index[bone.parent.name]]) @ rest[k]
+    frames = location.shape[0]
+    basis = np.zeros((frames, len(bones), 4, 4))
+    basis[..., :3, :3] = (
+        Rotation.from_quat(rotation[..., [1, 2, 3, 0]].reshape(-1, 4))
+        .as_matrix()
+        .reshape(frames, len(bones), 3, 3)
+    )
+    basis[..., :3, 3] = location
+    basis[..., 3, 3] = 1.0
+    local = relative[None] @ basis
+    euler = Rotation.from_matrix(local[..., :3, :3].reshape(-1, 3, 3)).as_euler("xyz")
+    euler = np.unwrap(euler.reshape(frames, len(bones), 3), axis=0)
+    return {b.name: (local[:, k, :3, 3], euler[:, k]) for k, b in enumerate(bones)}
+
+
+@contextlib.contextmanager
+def _bones_baked_from(arm, values: dict[str, tuple], start: int):
+    """While the exporter bakes the animation, it takes the armature's bone transforms from
+    ``values`` (frames from ``start``) instead of evaluating each bone of each frame in
+    Python: the same numbers (the action keyed from them is what Blender would evaluate),
+    a fraction of the time. Other objects, and bones of other frames, go the exporter's
+    own way; with a bone axis correction (not this exporter's default) nothing is replaced."""
+    from io_scene_fbx import export_fbx_bin, fbx_utils
+    from mathutils import Euler, Vector
+
+    bpy = _bpy()
+    scene = bpy.context.scene
+    wrapper = fbx_utils.ObjectWrapper
+    own_tx, own_bake = wrapper.fbx_object_tx, export_fbx_bin.fbx_animations_do
+    baking = [False]
+
+    def fbx_object_tx(self, scene_data, rest=False, rot_euler_compat=None):
+        frame = scene.frame_current - start
+        name = self.bdata.name if self._tag == "BO" and self._ref == arm else None
+        if (
+            not baking[0]
+            or rest
+            or name not in values
+            or scene_data.settings.bone_correction_matrix is not None
+            or not 0 <= frame < len(values[name][0])
+        ):
+            return own_tx(self, scene_data, rest=rest, rot_euler_compat=rot_euler_compat)
+        loc, euler = values[name]
+        rot = Euler(euler[frame], "XYZ")
+        return Vector(loc[frame]), rot, Vector((1.0, 1.0, 1.0)), None, None
+
+    def fbx_animations_do(*args, **kwargs):
+        baking[0] = True
+        try:
+            return own_bake(*args, **kwargs)
+        finally:
+            baking[0] = False
+
+    wrapper.fbx_object_tx, export_fbx_bin.fbx_animations_do = fbx_object_tx, fbx_animations_do
+    try:
+        yield
+    finally:
+        wrapper.fbx_object_tx, export_fbx_bin.fbx_animations_do = own_tx, own_bake
 
 
 def _escape(name: str) -> str:

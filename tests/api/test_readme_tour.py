@@ -6,9 +6,12 @@ changes, this fails instead of the newcomer.
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -38,6 +41,8 @@ def test_the_readme_tour_works_as_written(tmp_path):
     # The tour runs in a clone's root: give it the files it names, and nothing else.
     shutil.copy(README, tmp_path / "README.md")
     shutil.copytree(REPO / "tests" / "data", tmp_path / "tests" / "data")
+    shutil.copytree(REPO / "tests" / "blender", tmp_path / "tests" / "blender")
+    (tmp_path / ".venv").symlink_to(Path(sys.executable).parent.parent)  # the clone's venv
     env = {"MOTION_STYLES_DIR": str(tmp_path / "styles")}
     with ServerProcess(env=env, log_path=tmp_path / "server.log", start_timeout=180) as server:
         script = commands.replace("http://localhost:8000", server.url).replace(
@@ -62,3 +67,5 @@ def test_the_readme_tour_works_as_written(tmp_path):
     for name in written:
         head = (tmp_path / name).read_text()[:9]
         assert head == "HIERARCHY", f"{name} is not a BVH: {head!r}"
+    if importlib.util.find_spec("bpy") is not None:  # the FBX part ran (the fbx extra)
+        assert (tmp_path / "proud.fbx").read_bytes().startswith(b"Kaydara FBX Binary")
