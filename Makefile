@@ -127,7 +127,8 @@ export-translator: $(VENV)/.dev
 # networks in onnxruntime vs torch eager, the translator pipeline, dance generation for a
 # 3-minute song, the translator and dance networks in onnxruntime vs torch eager, end-to-end
 # HTTP latency (240/960/3,840 frames, end to end over the networks' own Server-Timing, cost
-# vs length, throughput at 1-8 clients), 48 clients sending a 3,840-frame transfer at once
+# vs length, throughput at 1-8 clients), an FBX transfer against the same character's GLB one
+# (with bpy), 48 clients sending a 3,840-frame transfer at once
 # (200 or 503 with Retry-After, peak RSS) and the loopback load test. Not part of `make test`.
 BENCH_AGAINST ?= 836ff33
 .PHONY: bench
@@ -139,6 +140,7 @@ bench: $(VENV)/.dev
 	$(PY) -m bench.bench_dance
 	$(PY) -m bench.bench_networks
 	$(PY) -m bench.bench_http
+	$(PY) -m bench.bench_fbx
 	$(PY) -m bench.overload
 	$(PY) -m bench.load --clients 16 --duration 60 $(LOAD_ARGS)
 

@@ -13,12 +13,13 @@ no Blender worker holds it already and every request imports it, as a new clip w
 ``--same-file`` sends the same bytes each time (the worker that read it last keeps it
 imported). Latency is the client's wall time per request; the table gives p50 and p95 of each,
 the ratio of the p50s, and the median of each Server-Timing stage. Needs bpy; exits 1 on
-any answer but 200.
+any answer but 200; says it skipped, and exits 0, without bpy.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import statistics
@@ -66,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--same-file", action="store_true", help="the same FBX bytes each time")
     parser.add_argument("--json", action="store_true", help="print the table as JSON")
     args = parser.parse_args(argv)
+    if importlib.util.find_spec("bpy") is None:
+        print("bench_fbx: skipped, Blender as a Python module (the fbx extra) is not installed")
+        return 0
 
     with tempfile.TemporaryDirectory(prefix="bench-fbx-") as folder:
         files = make_character(Path(folder), args.segments)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import signal
 import sys
 import tempfile
 import traceback
@@ -358,6 +359,9 @@ OPERATIONS = {"read": read, "write": write}
 def serve(connection) -> None:
     """Answer requests on ``connection`` until it closes. Blender's own output (its
     importer's and exporter's progress lines) goes to /dev/null."""
+    # Ctrl-C in a terminal reaches the whole process group: the worker ends when the service
+    # closes its connection instead, so a request in flight during a shutdown still finishes
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
     os.dup2(devnull, 2)
