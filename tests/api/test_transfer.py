@@ -1,13 +1,11 @@
-"""``POST /v1/transfer``, ``POST /v1/style-code`` and the translator's ``GET /v1/styles``,
-against the real app and the SHIPPED translator (``models/translator``)."""
+"""``POST /v1/transfer`` and the translator's ``GET /v1/styles``, against the real app and the
+SHIPPED translator (``models/translator``). Its engine alone: test_translator_engine.py;
+``/v1/style-code``: test_style_code.py; bad input: test_transfer_errors.py."""
 
 from __future__ import annotations
 
-import io
 import json
 import math
-import tarfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -18,50 +16,22 @@ from motion import contacts as CT
 from motion import features as Fe
 from motion import kinematics as K
 from service.config import Settings
-from service.engines.restyling import BUCKET, MAX_WARP, MIN_WARP, pad_mirrored, padded_length
+from service.engines.restyling import MAX_WARP, MIN_WARP
 from service.engines.translator import (
-    CODE_NORM_LIMIT,
     SAME_STYLE_FAR,
     SAME_STYLE_NEAR,
-    StyleCodeJob,
-    TransferJob,
-    TranslatorEngine,
-    window_starts,
 )
-from service.errors import InvalidRequest
-from service.metrics import StageTimer
-from service.requests import StyleCode
-from service.routes.fields import parse_mix
 from tests import rigs
-from tests.api.helpers import assert_problem
+from tests.api.translator_helpers import (
+    ENTRY,
+    STYLES,
+    bandai,
+    needs_model,
+    transfer,
+    video_zip,
+)
 from tests.conftest import data_path
 from tests.rigs import FIXTURE
-
-
-def shipped_translator() -> dict | None:
-    models_dir = Settings().models_dir
-    if not (models_dir / "translator").exists():
-        return None
-    try:
-        doc = json.loads((models_dir / "manifest.json").read_text())
-    except (OSError, ValueError):
-        return None
-    return next((m for m in doc.get("models", []) if m.get("family") == "translator"), None)
-
-
-ENTRY = shipped_translator()
-STYLES = sorted(ENTRY["extra"]["styles"]) if ENTRY else []
-needs_model = pytest.mark.skipif(ENTRY is None, reason="no translator shipped in models/translator")
-UNMAPPABLE = (
-    b"HIERARCHY\nROOT Pelvis\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition"
-    b" Zrotation Xrotation Yrotation\n JOINT Tail\n {\n  OFFSET 0 -10 0\n  CHANNELS 3"
-    b" Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 -5 0\n  }\n }\n}\n"
-    b"MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 0 0 0 0 0 0 0 0\n0 0 0 0 0 0 0 0 0\n"
-)
-
-
-def bandai(name: str) -> bytes:
-    return data_path("bandai", "dataset-1", f"{name}.bvh").read_bytes()
 
 
 @pytest.fixture(scope="module")
@@ -69,24 +39,9 @@ def walk() -> bytes:
     return Path(FIXTURE).read_bytes()
 
 
-def video_zip(number: int) -> bytes:
-    """The OpenPose JSON files of a real treadmill video (23.976 fps), zipped."""
-    folder = data_path("keypoints", f"openpose-treadmill-{number}")
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as archive:
-        for path in sorted(folder.glob("*.json")):
-            archive.write(path, path.name)
-    return buf.getvalue()
-
-
 @pytest.fixture(scope="module")
 def treadmill_zip() -> bytes:
     return video_zip(27)  # a walk ("teenage hooligan")
-
-
-def transfer(client, content: bytes, query: str = "", files=None, **fields):
-    parts = {"content": ("content.bvh", content, "text/plain"), **(files or {})}
-    return client.post("/v1/transfer" + query, files=parts, data=fields)
 
 
 def assert_same_rig(result_text: str, source: bytes, frames: int | None = None):
@@ -149,73 +104,6 @@ def own_speed(client, clip: bytes) -> float:
     near, far = SAME_STYLE_NEAR * style_gap(), SAME_STYLE_FAR * style_gap()
     weight = min(max((far - nearest["distance"]) / (far - near), 0.0), 1.0)
     return speeds()[nearest["style"]] ** weight
-
-
-# --------------------------------------------------------------------------- engine helpers
-
-
-def restyle(engine, content, style, **options):
-    """The translator's core on canonical ``content`` in ``style`` (a code, a clip or
-    keypoints): the canonical motion it returns."""
-    return engine.predict(TransferJob(content, style, **options), StageTimer(engine.name)).motion
-
-
-def test_padding_buckets_and_mirroring():
-    assert padded_length(1, 65) == 2 * BUCKET
-    assert padded_length(60, 65) == 2 * BUCKET and padded_length(129, 65) == 3 * BUCKET
-    assert padded_length(3 * BUCKET, 65) == 3 * BUCKET
-    x = np.arange(10, dtype=np.float32)[:, None]
-    padded, offset = pad_mirrored(x, 64)
-    assert padded.shape == (64, 1)
-    np.testing.assert_array_equal(padded[offset : offset + 10], x)
-    short, offset = pad_mirrored(x[:3], 128)  # far shorter than the pad: still mirrored
-    assert short.shape == (128, 1) and set(short[:, 0]) == {0.0, 1.0, 2.0}
-    np.testing.assert_array_equal(short[offset : offset + 3], x[:3])
-
-
-WINDOW = 64  # the shipped restyler's training length (its bundle's extra.window)
-
-
-@pytest.mark.parametrize("frames", [WINDOW, WINDOW + 1, 2 * WINDOW, 5 * WINDOW + 7])
-def test_windows_cover_every_frame(frames):
-    starts = window_starts(frames, WINDOW)
-    assert starts[0] == 0 and starts[-1] == frames - WINDOW
-    assert all(0 < b - a <= WINDOW // 2 for a, b in zip(starts, starts[1:], strict=False))
-    covered = np.zeros(frames, dtype=int)
-    for s in starts:
-        covered[s : s + WINDOW] += 1
-    assert covered.min() >= 1
-
-
-@pytest.mark.parametrize("window", [32, WINDOW])
-def test_blending_windows_of_one_signal_gives_it_back(window):
-    frames = 3 * window + 5
-    signal = np.random.default_rng(0).normal(size=(frames, 4)).astype(np.float32)
-    windows, offset, length = TranslatorEngine._windows(signal, window)
-    assert offset == 0 and length == frames and windows.shape[1:] == (4, window)
-    assert len(windows) == len(window_starts(frames, window, window // 2))
-    np.testing.assert_allclose(TranslatorEngine._blend(windows, length), signal, atol=1e-6)
-    short, offset, length = TranslatorEngine._windows(signal[:5], window)  # mirrored to one
-    assert short.shape == (1, 4, window) and length == window
-    np.testing.assert_array_equal(short[0, :, offset : offset + 5], signal[:5].T)
-
-
-def test_velocity_factor_from_an_encoding_is_the_features_one(walk):
-    canon = retarget.to_canonical(bvh.loads(walk))
-    assert Fe.encoded_velocity_factor(Fe.encode(canon)) == pytest.approx(
-        Fe.velocity_factor(canon), 1e-12
-    )
-
-
-def test_parse_mix():
-    assert parse_mix('{"happy": 2, "old": 0}') == {"happy": 2.0, "old": 0.0}
-    for bad in ("{not json", "[1]", "{}", '{"a": -1}', '{"a": "x"}', '{"a": true}',
-                '{"a": 0, "b": 0}', '{"a": NaN}', '{"a": 1e999}'):  # fmt: skip
-        with pytest.raises(InvalidRequest):
-            parse_mix(bad)
-
-
-# --------------------------------------------------------------------------- transfers
 
 
 @needs_model
@@ -392,103 +280,6 @@ def test_a_z_up_file_is_styled_as_its_y_up_twin(shared_client, walk):
     assert np.abs(turned - out_y).max() < 0.05  # cm: BVH text rounding
 
 
-@pytest.fixture(scope="module")
-def engine() -> TranslatorEngine:
-    """The shipped translator's engine, loaded as the service loads it."""
-    from service.manifest import load_manifest
-
-    settings = Settings()
-    entry = next(m for m in load_manifest(settings.models_dir).models if m.name == ENTRY["name"])
-    engine = TranslatorEngine(entry, settings.models_dir, settings)
-    engine.load()
-    return engine
-
-
-@needs_model
-def test_decoder_jitter_is_smoothed_away(engine, walk):
-    """The decoder adds frame-to-frame jitter (2.9x the content's unsmoothed on this walk,
-    4.7x when whole clips ran through it); the output smoothing brings it near real
-    motion's (0.8x)."""
-    content = retarget.to_canonical(bvh.loads(walk))
-
-    def jitter(motion) -> float:  # cm per frame^2 of the joints around the hips
-        g = K.global_positions(motion)
-        return float(np.linalg.norm(np.diff(g[:, 1:] - g[:, 1:2], 2, axis=0), axis=-1).mean())
-
-    ratios = []
-    for name in STYLES:
-        out = restyle(engine, content, engine.code_of_name(name), time_warp=False)
-        ratios.append(jitter(out) / jitter(content))
-    assert np.mean(ratios) < 2.0, np.round(ratios, 2)
-
-
-@needs_model
-def test_a_frame_depends_on_nearby_frames_only(engine, walk):
-    """The networks run on training-length windows: frames appended far after a frame
-    leave it as it was (a whole clip at once renormalised every frame by all the others)."""
-
-    def there_and_back(x: np.ndarray) -> np.ndarray:  # the walk, then backwards, then again
-        return np.concatenate([x, x[::-1], x])
-
-    walk = retarget.to_canonical(bvh.loads(walk))
-    content = walk.replace(lrot=there_and_back(walk.lrot), lpos=there_and_back(walk.lpos))
-    longer = content.replace(lrot=there_and_back(content.lrot), lpos=there_and_back(content.lpos))
-    code = engine.code_of_name(STYLES[0])
-    # frames before the clip's last window, less the output smoothing's reach (4 sigma)
-    kept = window_starts(content.num_frames, WINDOW)[-1] - int(4 * engine.output_smoothing)
-    assert kept >= WINDOW // 2
-    a = restyle(engine, content, code, time_warp=False, foot_cleanup=False)
-    b = restyle(engine, longer, code, time_warp=False, foot_cleanup=False)
-    np.testing.assert_allclose(b.lrot[:kept], a.lrot[:kept], atol=1e-4)
-
-
-@needs_model
-@pytest.mark.parametrize("example", ["clip", "video"])
-def test_a_style_clip_or_video_plays_its_code_taken_out_as_names_are(engine, walk, example):
-    """A style clip's or video's code as the encoder gives it (what ``/v1/style-code``
-    reports) plays the manifest's ``clip_style_gain`` or ``video_style_gain`` times as far
-    from the centre of the learned codes, as a name's is taken out: the restyler decodes
-    that code, not the encoded one."""
-    content = retarget.to_canonical(bvh.loads(walk))
-    style = content.replace(lrot=content.lrot[::-1].copy(), lpos=content.lpos[::-1].copy())
-    kp = Fe.keypoints_of_positions(K.global_positions(style), yaw=0.6)
-    example, source, gain_name = {
-        "clip": (style, "style", "clip"),
-        "video": (kp, "keypoints", "video"),
-    }[example]
-    gain = engine.example_gains[source]
-    assert gain == ENTRY["extra"][f"{gain_name}_style_gain"]
-    encoded = engine.predict(StyleCodeJob(example), StageTimer(engine.name))
-    assert encoded.source == source and gain > 1
-    centre = engine.codes.mean(axis=0)
-    taken_out = (centre + gain * (encoded.code - centre)).astype(np.float32)
-    options = {"time_warp": False, "foot_cleanup": False}
-    played = restyle(engine, content, example, **options)
-    as_taken_out = restyle(engine, content, StyleCode(taken_out, None, "code"), **options)
-    as_encoded = restyle(engine, content, StyleCode(encoded.code, None, "code"), **options)
-    np.testing.assert_allclose(played.lrot, as_taken_out.lrot, atol=1e-4)
-    assert np.abs(played.lrot - as_encoded.lrot).max() > 1e-2
-
-
-@needs_model
-def test_strength_zero_gives_the_content_back(engine, walk):
-    """Strength 0 keeps the content's pose (rotations and hips height) frame for frame; half
-    way lands between it and the full style."""
-    content = retarget.to_canonical(bvh.loads(walk))
-    code = engine.code_of_name("elderly")
-
-    def restyled(strength: float):
-        out = restyle(engine, content, code, strength=strength, time_warp=False, foot_cleanup=False)
-        return Fe.encode(out).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
-
-    own = Fe.encode(content).style3d.reshape(content.num_frames, -1, 3) * Fe.LEG
-    assert np.abs(restyled(0.0) - own).max() < 0.05  # cm
-    full, half = restyled(1.0), restyled(0.5)
-    gap = np.linalg.norm(full - own, axis=-1).mean()
-    assert gap > 1.0
-    assert np.linalg.norm(half - own, axis=-1).mean() < 0.75 * gap
-
-
 @needs_model
 def test_another_name_of_a_style_is_that_style(shared_client, walk):
     """Bandai's dataset 1 calls elderly "old": both names give one result, and the style
@@ -508,194 +299,3 @@ def test_short_clip_is_padded_not_refused(shared_client, walk):
     source = bvh.dumps(bvh.loads(walk).slice(0, 3)).encode()
     response = transfer(shared_client, source, style_name=STYLES[0], time_warp="false")
     assert_transfer_ok(response, source, frames=3)
-
-
-# --------------------------------------------------------------------------- style codes
-
-
-@needs_model
-def test_style_code_of_a_name_is_its_table_code(shared_client):
-    name = STYLES[1]
-    response = shared_client.post("/v1/style-code", data={"style_name": name})
-    assert response.status_code == 200, response.text
-    body = response.json()
-    assert len(body["code"]) == ENTRY["extra"]["style_dim"]
-    np.testing.assert_allclose(body["code"], ENTRY["extra"]["styles"][name]["code"], atol=1e-5)
-    assert body["nearest"][0] == {"style": name, "distance": 0.0}
-    distances = [n["distance"] for n in body["nearest"]]
-    assert len(distances) == 5 and distances == sorted(distances)
-
-
-def keypoints_code(client, zipped: bytes) -> dict:
-    files = {"keypoints": ("k.zip", zipped, "application/octet-stream")}
-    response = client.post("/v1/style-code", files=files, data={"keypoints_fps": "23.976"})
-    assert response.status_code == 200, response.text
-    body = response.json()
-    assert len(body["code"]) == ENTRY["extra"]["style_dim"] and body["velocity_factor"] is None
-    assert {n["style"] for n in body["nearest"]} <= set(STYLES)
-    return body
-
-
-@needs_model
-def test_style_code_of_a_walking_video_is_among_the_learned_styles(shared_client, treadmill_zip):
-    """The detector's hips, neck and head moved to the canonical joint centres, a real
-    video's walk codes like the motion the encoder learned from (at 2D points it codes
-    3-4x beyond every named style)."""
-    body = keypoints_code(shared_client, treadmill_zip)
-    table = np.asarray([s["code"] for s in ENTRY["extra"]["styles"].values()])
-    assert np.linalg.norm(body["code"]) <= np.linalg.norm(table, axis=1).max()
-    assert not any("outside the learned styles" in w for w in body["warnings"])
-
-
-@needs_model
-def test_style_code_far_outside_the_learned_styles_is_bounded(shared_client):
-    body = keypoints_code(shared_client, video_zip(95))  # someone collapsing on a treadmill
-    table = np.asarray([s["code"] for s in ENTRY["extra"]["styles"].values()])
-    limit = CODE_NORM_LIMIT * np.linalg.norm(table, axis=1).max()
-    assert np.linalg.norm(body["code"]) <= limit * (1 + 1e-4)
-    assert any("outside the learned styles" in w for w in body["warnings"])
-
-
-@needs_model
-def test_codes_within_the_learned_styles_are_not_bounded(shared_client, walk):
-    r = shared_client.post("/v1/style-code", files={"style": ("w.bvh", walk, "text/plain")})
-    assert r.status_code == 200, r.text
-    assert not any("outside the learned styles" in w for w in r.json()["warnings"])
-
-
-def held_out_dataset2_takes() -> dict[str, bytes]:
-    """Bandai dataset-2 takes the shipped translator never trained on (its validation rule:
-    not as content, target or style clip), as BVH text by take name."""
-    from training.translator.fit import held_out_take
-
-    archive = data_path("bandai", "dataset-2", "dataset-2-subset.tar.xz")
-    takes = {}
-    with tarfile.open(archive) as tar:
-        for member in tar.getmembers():
-            name = Path(member.name).stem
-            if member.name.endswith(".bvh") and held_out_take(name):
-                takes[name] = tar.extractfile(member).read()
-    return takes
-
-
-@needs_model
-def test_held_out_clips_are_near_their_style(shared_client):
-    """A clip's style code lies near its style's: the true style is among the three nearest
-    for most never-seen takes (chance: 3 in 16)."""
-    takes = held_out_dataset2_takes()
-    assert len(takes) >= 20
-    hits = 0
-    for take, text in takes.items():
-        files = {"style": ("s.bvh", text, "text/plain")}
-        body = shared_client.post("/v1/style-code", files=files).json()
-        assert len(body["code"]) == ENTRY["extra"]["style_dim"]
-        hits += take.split("_")[2] in [n["style"] for n in body["nearest"][:3]]
-    assert hits >= 0.6 * len(takes), f"{hits} of {len(takes)} held-out clips near their style"
-
-
-# --------------------------------------------------------------------------- errors
-
-
-@needs_model
-def test_no_or_several_style_inputs_are_400(shared_client, walk):
-    body = assert_problem(transfer(shared_client, walk), 400, "invalid-request")
-    assert body["fields"] == []
-    body = assert_problem(
-        transfer(
-            shared_client,
-            walk,
-            files={"style": ("s.bvh", walk, "text/plain")},
-            style_name=STYLES[0],
-        ),
-        400,
-        "invalid-request",
-    )
-    assert body["fields"] == ["style", "style_name"]
-    assert "style_name" in body["detail"]
-    assert_problem(shared_client.post("/v1/style-code", data={}), 400, "invalid-request")
-
-
-@needs_model
-def test_unknown_style_name_is_404(shared_client, walk):
-    body = assert_problem(transfer(shared_client, walk, style_name="no-such-style"), 404)
-    assert body["styles"] == STYLES
-    mix = json.dumps({STYLES[0]: 1, "no-such-style": 1})
-    assert_problem(transfer(shared_client, walk, style_mix=mix), 404, "not-found")
-    response = shared_client.post("/v1/style-code", data={"style_name": "no-such-style"})
-    assert_problem(response, 404, "not-found")
-
-
-@needs_model
-@pytest.mark.parametrize("mix", ["{not json", "[1, 2]", '{"happy": -1}', "{}", '{"a": "b"}'])
-def test_bad_style_mix_is_400(shared_client, walk, mix):
-    body = assert_problem(transfer(shared_client, walk, style_mix=mix), 400, "invalid-request")
-    assert body["field"] == "style_mix"
-
-
-@needs_model
-@pytest.mark.parametrize("strength", ["2", "-0.5", "nan", "strong"])
-def test_strength_out_of_range_is_400(shared_client, walk, strength):
-    response = transfer(shared_client, walk, style_name=STYLES[0], strength=strength)
-    assert_problem(response, 400, "invalid-request")
-
-
-@needs_model
-def test_non_bvh_content_is_400_with_line(shared_client):
-    text = b"HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n"
-    body = assert_problem(transfer(shared_client, text, style_name=STYLES[0]), 400)
-    assert body["line"] == 4
-
-
-@needs_model
-def test_unmappable_skeleton_is_422(shared_client, walk):
-    body = assert_problem(
-        transfer(shared_client, UNMAPPABLE, style_name=STYLES[0]), 422, "unusable-input"
-    )
-    assert body["unmapped"]
-    files = {"style": ("s.bvh", UNMAPPABLE, "text/plain")}
-    body = assert_problem(transfer(shared_client, walk, files=files), 422, "unusable-input")
-    assert body["unmapped"]
-
-
-@needs_model
-def test_wrong_media_types_are_415(shared_client, walk):
-    files = {"keypoints": ("k.png", b"\x89PNG\r\n\x1a\n", "image/png")}
-    assert_problem(transfer(shared_client, walk, files=files), 415, "unsupported-media-type")
-    files = {"style": ("s.png", b"\x89PNG\r\n\x1a\n", "image/png")}
-    assert_problem(transfer(shared_client, walk, files=files), 415, "unsupported-media-type")
-
-
-@needs_model
-def test_bad_keypoints_and_mappings_are_400(shared_client, walk):
-    files = {"keypoints": ("k.json", b"{not json", "application/json")}
-    assert_problem(transfer(shared_client, walk, files=files), 400)
-    files = {"style": ("s.bvh", walk, "text/plain")}
-    body = assert_problem(
-        transfer(shared_client, walk, files=files, style_mapping="[1]"), 400, "invalid-request"
-    )
-    assert body["field"] == "style_mapping"
-    response = transfer(shared_client, walk, style_name=STYLES[0], mapping="{nope")
-    assert_problem(response, 400, "invalid-request")
-
-
-@needs_model
-def test_too_many_frames_is_413(make_client, walk):
-    client = make_client(Settings(max_frames=10))
-    body = assert_problem(transfer(client, walk, style_name=STYLES[0]), 413, "too-large")
-    assert body["limit"] == 10
-
-
-@needs_model
-def test_named_codes_are_taken_from_the_centre_by_their_gains(engine):
-    """A named style's code lies its ``named_style_gains`` times as far from the centre of
-    the learned codes as the learned one, on the same line; the codes clips are compared
-    with for their nearest styles stay as learned."""
-    gains = engine.entry.extra["named_style_gains"]
-    assert set(gains) == set(engine.style_names) and min(gains.values()) > 1.0
-    learned = engine.codes
-    centre = learned.mean(axis=0)
-    for name in ("active", "angry", "elderly", "normal"):
-        code = engine.code_of_name(name).code
-        expected = centre + gains[name] * (learned[engine.index[name]] - centre)
-        np.testing.assert_allclose(code, expected, atol=1e-5)
-    assert engine.nearest(learned[engine.index["angry"]])[0]["style"] == "angry"

@@ -1,0 +1,112 @@
+"""``POST /v1/style-code`` against the real app and the SHIPPED translator: a name's code, a
+video's, codes bounded outside the learned styles, never-seen takes near their style."""
+
+from __future__ import annotations
+
+import tarfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.engines.translator import (
+    CODE_NORM_LIMIT,
+)
+from tests.api.translator_helpers import (
+    ENTRY,
+    STYLES,
+    needs_model,
+    video_zip,
+)
+from tests.conftest import data_path
+from tests.rigs import FIXTURE
+
+
+@pytest.fixture(scope="module")
+def walk() -> bytes:
+    return Path(FIXTURE).read_bytes()
+
+
+@pytest.fixture(scope="module")
+def treadmill_zip() -> bytes:
+    return video_zip(27)  # a walk ("teenage hooligan")
+
+
+@needs_model
+def test_style_code_of_a_name_is_its_table_code(shared_client):
+    name = STYLES[1]
+    response = shared_client.post("/v1/style-code", data={"style_name": name})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert len(body["code"]) == ENTRY["extra"]["style_dim"]
+    np.testing.assert_allclose(body["code"], ENTRY["extra"]["styles"][name]["code"], atol=1e-5)
+    assert body["nearest"][0] == {"style": name, "distance": 0.0}
+    distances = [n["distance"] for n in body["nearest"]]
+    assert len(distances) == 5 and distances == sorted(distances)
+
+
+def keypoints_code(client, zipped: bytes) -> dict:
+    files = {"keypoints": ("k.zip", zipped, "application/octet-stream")}
+    response = client.post("/v1/style-code", files=files, data={"keypoints_fps": "23.976"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert len(body["code"]) == ENTRY["extra"]["style_dim"] and body["velocity_factor"] is None
+    assert {n["style"] for n in body["nearest"]} <= set(STYLES)
+    return body
+
+
+@needs_model
+def test_style_code_of_a_walking_video_is_among_the_learned_styles(shared_client, treadmill_zip):
+    """The detector's hips, neck and head moved to the canonical joint centres, a real
+    video's walk codes like the motion the encoder learned from (at 2D points it codes
+    3-4x beyond every named style)."""
+    body = keypoints_code(shared_client, treadmill_zip)
+    table = np.asarray([s["code"] for s in ENTRY["extra"]["styles"].values()])
+    assert np.linalg.norm(body["code"]) <= np.linalg.norm(table, axis=1).max()
+    assert not any("outside the learned styles" in w for w in body["warnings"])
+
+
+@needs_model
+def test_style_code_far_outside_the_learned_styles_is_bounded(shared_client):
+    body = keypoints_code(shared_client, video_zip(95))  # someone collapsing on a treadmill
+    table = np.asarray([s["code"] for s in ENTRY["extra"]["styles"].values()])
+    limit = CODE_NORM_LIMIT * np.linalg.norm(table, axis=1).max()
+    assert np.linalg.norm(body["code"]) <= limit * (1 + 1e-4)
+    assert any("outside the learned styles" in w for w in body["warnings"])
+
+
+@needs_model
+def test_codes_within_the_learned_styles_are_not_bounded(shared_client, walk):
+    r = shared_client.post("/v1/style-code", files={"style": ("w.bvh", walk, "text/plain")})
+    assert r.status_code == 200, r.text
+    assert not any("outside the learned styles" in w for w in r.json()["warnings"])
+
+
+def held_out_dataset2_takes() -> dict[str, bytes]:
+    """Bandai dataset-2 takes the shipped translator never trained on (its validation rule:
+    not as content, target or style clip), as BVH text by take name."""
+    from training.translator.fit import held_out_take
+
+    archive = data_path("bandai", "dataset-2", "dataset-2-subset.tar.xz")
+    takes = {}
+    with tarfile.open(archive) as tar:
+        for member in tar.getmembers():
+            name = Path(member.name).stem
+            if member.name.endswith(".bvh") and held_out_take(name):
+                takes[name] = tar.extractfile(member).read()
+    return takes
+
+
+@needs_model
+def test_held_out_clips_are_near_their_style(shared_client):
+    """A clip's style code lies near its style's: the true style is among the three nearest
+    for most never-seen takes (chance: 3 in 16)."""
+    takes = held_out_dataset2_takes()
+    assert len(takes) >= 20
+    hits = 0
+    for take, text in takes.items():
+        files = {"style": ("s.bvh", text, "text/plain")}
+        body = shared_client.post("/v1/style-code", files=files).json()
+        assert len(body["code"]) == ENTRY["extra"]["style_dim"]
+        hits += take.split("_")[2] in [n["style"] for n in body["nearest"][:3]]
+    assert hits >= 0.6 * len(takes), f"{hits} of {len(takes)} held-out clips near their style"
