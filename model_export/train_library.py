@@ -24,12 +24,16 @@ is nearest its style's, the fast networks' fit). Checkpoints live in ``--work``;
 the command continues where it stopped: a stage from its last checkpoint (weights, optimiser
 and random state), finished stages and styles skipped. Progress bars give an ETA;
 TensorBoard logs go to ``--runs``. ``--device auto`` takes CUDA where torch sees it.
+Under ``torchrun --nproc_per_node N -m model_export.train_library ...`` the translator
+trains on N processes (``training.distributed``: gloo on CPUs, NCCL on GPUs) and the first
+one goes on to export and distil.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -163,6 +167,8 @@ def train_main(argv: list[str]) -> int:
     clips = L.read_library(args.library)
     data, extra = provenance(args, library.content_hash())
     checkpoint = train_translator(args, device)
+    if int(os.environ.get("RANK", "0")) > 0:
+        return 0  # under torchrun: the first process exports and distils
     args.out.mkdir(parents=True, exist_ok=True)
     translator = export_translator.export(
         checkpoint,

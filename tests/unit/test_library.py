@@ -318,3 +318,27 @@ def test_the_bandai_library_holds_what_training_read_by_file_names(data_dir, tmp
         np.testing.assert_array_equal(a.lrot, b.lrot)
         np.testing.assert_array_equal(a.root, b.root)
     assert sum(c.extra["held_out"] for c in clips) == 29
+
+
+@pytest.mark.slow
+def test_two_processes_train_one_translator_under_torchrun(good_library, tmp_path):
+    """torchrun, gloo, 2 CPU processes: each draws its own batches (their random states
+    are both kept), the averaged gradients keep their weights equal to the last bit."""
+    torch = pytest.importorskip("torch")
+    torchrun = Path(sys.executable).with_name("torchrun")
+    if not torchrun.exists():
+        pytest.skip("torchrun is not installed beside this Python")
+    out = tmp_path / "t.pt"
+    env = {**__import__("os").environ, "MOTION_SMOKE": "1", "PYTHONPATH": str(REPO)}
+    result = subprocess.run(
+        [str(torchrun), "--nproc_per_node", "2", "-m", "training.translator.fit",
+         "--library", str(good_library), "--out", str(out), "--runs", str(tmp_path / "runs"),
+         "--channels", "32", "--stage", "paired"],
+        capture_output=True, text=True, cwd=REPO, timeout=600, env=env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "2 processes, weights apart by at most 0.00e+00" in result.stdout
+    payload = torch.load(out, weights_only=False)
+    assert payload["processes"] == 2 and payload["stages"] == ["paired"]
+    rngs = torch.load(f"{out}.state", weights_only=False)["rngs"]
+    assert len(rngs) == 2 and rngs[0] != rngs[1]

@@ -48,6 +48,7 @@ from motion import canonical as C
 from motion import features as Fe
 from motion.styles import STYLE_ALIASES
 from training import data as D
+from training import distributed
 from training.fk import RootLocalFK
 from training.library import read_library
 from training.translator.networks import (
@@ -203,10 +204,14 @@ class Trainer:
         self.pairs = Pairs([t for t in takes if t.name not in held_out], cfg.window, self.rng)
         self.val_pairs = Pairs(takes, cfg.window, self.rng, contents=held_out)
         self.alignment_cache = D.cache_dir() / "translator_alignments.npz"
+        if distributed.rank() > 0:
+            distributed.barrier()  # the first process aligns and caches every pair
         if self.alignment_cache.exists():
             self.pairs.alignments = load_alignments(self.alignment_cache)
         self.val_pairs.alignments = self.pairs.alignments
         self._align_every_pair()
+        if distributed.rank() == 0:
+            distributed.barrier()
         self.net = Translator(net_cfg).to(self.device)
         self.disc = Discriminator(net_cfg).to(self.device)
         self.disc_opt = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.99))
@@ -217,6 +222,11 @@ class Trainer:
             "out_std": torch.tensor(std, device=self.device),
         }
         self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
+        distributed.broadcast_parameters(self.net)
+        distributed.broadcast_parameters(self.disc)
+        if distributed.rank() > 0:  # the same data everywhere, batches of its own
+            seeded = np.random.default_rng([cfg.seed, distributed.rank()])
+            self.rng.bit_generator.state = seeded.bit_generator.state
         self.step = 0
         self.stages: list[str] = []  # schedule stages the weights have finished
         self.stage: str | None = None  # the stage these steps belong to (a resume continues it)
@@ -330,6 +340,7 @@ class Trainer:
         loss = loss_real + loss_fake
         self.disc_opt.zero_grad(set_to_none=True)
         loss.backward()
+        distributed.average_gradients(self.disc.parameters())
         self.disc_opt.step()
         return {
             "d_real": float(loss_real.detach()),
@@ -346,6 +357,7 @@ class Trainer:
             group["lr"] = lr
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
+        distributed.average_gradients(self.net.parameters())
         torch.nn.utils.clip_grad_norm_(self.net.parameters(), 5.0)
         self.opt.step()
         self.step += 1
@@ -376,7 +388,12 @@ class Trainer:
 
     def save(self, path: Path, finished: str | None = None) -> None:
         """Weights, configurations, statistics and styles in ``path``; the optimiser and the
-        random state (for ``--resume``) in ``path.state``, never committed."""
+        random state (for ``--resume``) in ``path.state``, never committed. Under
+        ``torchrun`` every process calls it (each one's random state is kept), the first
+        writes."""
+        rngs = distributed.gather(self.rng.bit_generator.state)
+        if distributed.rank() > 0:
+            return
         path.parent.mkdir(parents=True, exist_ok=True)
         stats = {f"{k}_{s}": torch.tensor(getattr(self.stats, s)[k])
                  for k in self.stats.mean for s in ("mean", "std")}  # fmt: skip
@@ -393,6 +410,7 @@ class Trainer:
             "stages": self.stages + ([finished] if finished else []),
             "stage": self.stage,
             "validation": self.validation,
+            "processes": distributed.world(),
         }
         torch.save(payload, str(path) + ".tmp")
         os.replace(str(path) + ".tmp", path)
@@ -401,7 +419,8 @@ class Trainer:
             "disc": self.disc.state_dict(),
             "disc_opt": self.disc_opt.state_dict(),
             "step": self.step,
-            "rng": self.rng.bit_generator.state,
+            "rng": rngs[0],
+            "rngs": rngs,
         }
         torch.save(state, str(path) + ".state.tmp")
         os.replace(str(path) + ".state.tmp", str(path) + ".state")
@@ -418,7 +437,9 @@ class Trainer:
             self.opt.load_state_dict(state["opt"])
             self.disc.load_state_dict(state["disc"])
             self.disc_opt.load_state_dict(state["disc_opt"])
-            self.rng.bit_generator.state = state["rng"]
+            rngs = state.get("rngs", [])
+            mine = rngs[distributed.rank()] if len(rngs) == distributed.world() else state["rng"]
+            self.rng.bit_generator.state = mine
 
 
 def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, TrainConfig]:
@@ -428,7 +449,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Train
     parser.add_argument("--init", type=Path, help="start from these weights (no optimiser)")
     parser.add_argument("--resume", action="store_true", help="continue --out with its optimiser")
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--log", type=Path, default=REPO / "runs" / "translator")
+    # --runs too: torchrun's own parser takes --log for an abbreviation of its --log-dir
+    parser.add_argument("--log", "--runs", type=Path, default=REPO / "runs" / "translator")
     parser.add_argument("--max-minutes", type=float, default=None)
     parser.add_argument("--channels", type=int, default=NetworkConfig().channels)
     parser.add_argument("--stage", help="the schedule stage this run is (recorded when done)")
@@ -447,6 +469,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Train
 
 def main(argv: list[str] | None = None) -> int:
     args, cfg = parse_args(argv)
+    args.device = distributed.start(args.device)
+    first = distributed.rank() == 0
     if os.environ.get("MOTION_SMOKE"):
         cfg.steps, cfg.val_every = 3, 2
     clips = None
@@ -469,20 +493,20 @@ def main(argv: list[str] | None = None) -> int:
         trainer.step = 0
     from torch.utils.tensorboard import SummaryWriter
 
-    writer = SummaryWriter(str(args.log))
+    writer = SummaryWriter(str(args.log)) if first else None
     started = last_save = time.time()
     first_step = trainer.step
     progress = tqdm(
         total=cfg.steps, initial=trainer.step, desc=f"translator {args.stage or ''}".strip(),
-        unit="step", mininterval=10, smoothing=0.05,
+        unit="step", mininterval=10, smoothing=0.05, disable=not first,
     )  # fmt: skip
     while trainer.step < cfg.steps:
         terms = trainer.train_step()
         progress.update(1)
-        if trainer.step % 50 == 0:
+        if trainer.step % 50 == 0 and first:
             for k, v in terms.items():
                 writer.add_scalar(f"train/{k}", v, trainer.step)
-        if trainer.step % cfg.val_every == 0 or trainer.step == cfg.steps:
+        if first and (trainer.step % cfg.val_every == 0 or trainer.step == cfg.steps):
             scores = trainer.validate(val)
             trainer.validation = {k: round(v, 6) for k, v in scores.items()}
             for k, v in scores.items():
@@ -491,15 +515,25 @@ def main(argv: list[str] | None = None) -> int:
             progress.write(f"step {trainer.step} "
                            + " ".join(f"{k} {v:.4f}" for k, v in scores.items())
                            + f" ({rate:.2f} steps/s)")  # fmt: skip
-        out_of_time = args.max_minutes and time.time() - started > 60 * args.max_minutes
-        if time.time() - last_save > 60 * cfg.checkpoint_minutes or out_of_time:
+        out_of_time = distributed.agree(
+            bool(args.max_minutes) and time.time() - started > 60 * args.max_minutes
+        )
+        if distributed.agree(time.time() - last_save > 60 * cfg.checkpoint_minutes) or out_of_time:
             trainer.save(args.out)
             last_save = time.time()
         if out_of_time:
             break
     trainer.save(args.out, finished=args.stage if trainer.step >= cfg.steps else None)
     progress.close()
-    writer.close()
+    spread = distributed.spread(trainer.net)
+    if distributed.world() > 1:
+        if first:
+            print(f"{distributed.world()} processes, weights apart by at most {spread:.2e}")
+        distributed.stop()
+        if spread > 0:
+            raise RuntimeError(f"the processes' weights drifted apart ({spread:.2e})")
+    if writer is not None:
+        writer.close()
     return 0
 
 
