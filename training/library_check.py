@@ -251,9 +251,22 @@ def estimate_hours(
     }
 
 
-def check(root: Path, translator_steps: int = 3000, measure: bool = True) -> CheckReport:
+def schedule_size(schedule: Path | None = None) -> tuple[int, int]:
+    """The translator's steps over every stage of ``schedule`` (the shipped one) and the
+    channels its last stage trains."""
+    from training.translator.fit import TrainConfig
+    from training.translator.networks import NetworkConfig
+    from training.translator.schedule import SCHEDULE, load_schedule
+
+    stages = load_schedule(schedule or SCHEDULE)
+    steps = sum(int(s["flags"].get("steps", TrainConfig.steps)) for s in stages)
+    return steps, int(stages[-1]["flags"].get("channels", NetworkConfig().channels))
+
+
+def check(root: Path, translator_steps: int | None = None, measure: bool = True) -> CheckReport:
     """The report on the library at ``root`` (module docstring); its clips are cached when
-    it has no problem."""
+    it has no problem. The estimate is for ``translator_steps`` (the shipped schedule's
+    by default)."""
     started = time.perf_counter()
     library, problems = L.read_labels(root)
     report = CheckReport(library=library.name, problems=problems)
@@ -266,7 +279,9 @@ def check(root: Path, translator_steps: int = 3000, measure: bool = True) -> Che
     if report.ok:
         L.clips_of(library, clips)
         if measure:
-            rates = measure_steps_per_second(max(len(report.styles), 1))
+            steps, channels = schedule_size()
+            translator_steps = translator_steps or steps
+            rates = measure_steps_per_second(max(len(report.styles), 1), channels)
             report.estimate |= estimate_hours(report, library.rows, translator_steps, rates)
     return report
 
