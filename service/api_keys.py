@@ -123,7 +123,7 @@ class KeysFile:
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
-        self._seen: tuple[int, int, int, int] | None = None
+        self._seen: tuple[int, ...] | None = None
         self._keys: list[ApiKey] = []
         self._reads = 0
         try:
@@ -160,11 +160,12 @@ class KeysFile:
                     self.path,
                     exc.strerror or exc,
                 )
-                self._seen, self._keys = None, []
+                # tried again when the file changes (a chmod changes its ctime), not each time
+                self._seen, self._keys = self._signature(stat), []
 
     @staticmethod
-    def _signature(stat: os.stat_result) -> tuple[int, int, int, int]:
-        return (stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns)
+    def _signature(stat: os.stat_result) -> tuple[int, ...]:
+        return (stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
 
     def _reload(self, stat: os.stat_result) -> None:
         text = self.path.read_text(encoding="utf-8", errors="replace")

@@ -206,6 +206,21 @@ def test_a_secret_updated_the_way_the_kubelet_does_it_is_read_again(tmp_path, ca
     assert keys.identify(first) is None and keys.identify(second)
 
 
+def test_a_keys_file_that_cannot_be_read_refuses_every_key_and_says_so_once(tmp_path, caplog):
+    keys_file = tmp_path / "keys"
+    key = api_keys.add_key(keys_file, "only", frozenset({"use"}))
+    keys = api_keys.KeysFile(keys_file)
+    saved = keys_file.read_bytes()
+    keys_file.unlink()
+    keys_file.mkdir()  # there, but not a file that can be read
+    with caplog.at_level(logging.ERROR, logger="service.api_keys"):
+        assert keys.identify(key) is None and keys.identify(key) is None
+    assert len(caplog.records) == 1 and "refusing every key" in caplog.text
+    keys_file.rmdir()
+    keys_file.write_bytes(saved)
+    assert keys.identify(key).name == "only"
+
+
 def test_a_key_over_its_rate_gets_429_with_retry_after_while_another_key_gets_through(
     make_client, tmp_path
 ):
