@@ -4,6 +4,8 @@
 #
 #   docker build -t motion-style .
 #   docker run -p 8000:8000 -e MOTION_WORKERS=2 -e MOTION_INTRA_OP_THREADS=1 motion-style
+#   docker run -p 8000:8000 -v "$PWD/keys:/keys:ro" -e MOTION_API_KEYS_FILE=/keys/api-keys \
+#     motion-style      # API keys (docs/api-keys.md): mount the folder, not the file
 #
 # Settings are MOTION_* variables (README); keep workers x intra-op threads <= the CPUs you
 # give the container. With several workers, `python -m service` points
