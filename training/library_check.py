@@ -212,12 +212,14 @@ def measure_steps_per_second(
 
 
 def _rate(step, seconds: float) -> float:
+    """Steps per second of this process's CPU time (one thread): what the machine's other
+    work does not change."""
     step()  # warm-up
-    n, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds or n < 3:
+    n, started = 0, time.process_time()
+    while time.process_time() - started < seconds or n < 3:
         step()
         n += 1
-    return n / (time.perf_counter() - started)
+    return n / (time.process_time() - started)
 
 
 def estimate_hours(
@@ -227,9 +229,11 @@ def estimate_hours(
     rates: dict[str, float],
     cores: int = 2,
 ) -> dict:
-    """Hours from random weights to exported models: aligning the pairs, the translator's
-    steps (one process), the fast networks' (one per style, ``cores`` at once); here at the
-    measured ``rates`` and on a GPU at the translator's recorded rate (the rest as here)."""
+    """CPU-hours from random weights to exported models (aligning the pairs, the
+    translator's steps, the fast networks') at the measured ``rates`` (steps per CPU
+    second), and the hours they take on this machine when idle (the translator on one core,
+    the fast networks ``cores`` at once) and with a GPU (the translator at its recorded
+    rate there, the rest as here)."""
     per_content = Counter((r.content, r.style) for r in rows if not r.held_out)
     by_content: dict[str, int] = Counter()
     for (content, _), n in per_content.items():
@@ -237,17 +241,20 @@ def estimate_hours(
     pairs = 2 * sum(n * (n - 1) for n in by_content.values())  # with mirror images
     align_h = pairs * ALIGN_SECONDS_PER_PAIR / 3600
     styles = len(report.styles)
-    fast_h = styles * FAST_STEPS / rates["fast"] / 3600 / max(1, min(cores, styles))
-    here = align_h + translator_steps / rates["translator"] / 3600 + fast_h
-    gpu = align_h + translator_steps / GPU_TRANSLATOR_STEPS_PER_S / 3600 + fast_h
+    translator_h = translator_steps / rates["translator"] / 3600
+    fast_cpu_h = styles * FAST_STEPS / rates["fast"] / 3600
+    fast_h = fast_cpu_h / max(1, min(cores, styles))
     return {
         "pairs_to_align": pairs,
         "translator_steps": translator_steps,
         "fast_steps": styles * FAST_STEPS,
-        "steps_per_s_here": {k: round(v, 2) for k, v in rates.items()},
+        "steps_per_cpu_s": {k: round(v, 2) for k, v in rates.items()},
         "gpu_translator_steps_per_s": GPU_TRANSLATOR_STEPS_PER_S,
-        "hours_here": round(here, 2),
-        "hours_gpu": round(gpu, 2),
+        "cpu_hours": round(align_h + translator_h + fast_cpu_h, 2),
+        "hours_here": round(align_h + translator_h + fast_h, 2),
+        "hours_gpu": round(
+            align_h + translator_steps / GPU_TRANSLATOR_STEPS_PER_S / 3600 + fast_h, 2
+        ),
     }
 
 
@@ -310,14 +317,14 @@ def render(report: CheckReport) -> str:
             lines.append(f"  {content}: {', '.join(styles)}")
     e = report.estimate
     if "hours_here" in e:
-        rate = e["steps_per_s_here"]
+        rate = e["steps_per_cpu_s"]
         lines.append(
-            f"estimate: {e['hours_here']:.2f} hours here (translator {rate['translator']:.2f} "
-            f"steps/s, fast networks {rate['fast']:.1f} steps/s, measured now on one thread; "
-            f"drawing examples not counted), {e['hours_gpu']:.2f} hours with a GPU "
-            f"(translator at {e['gpu_translator_steps_per_s']} steps/s as recorded on an "
-            f"H200); {e['translator_steps']} translator steps, {e['fast_steps']} fast steps, "
-            f"{e['pairs_to_align']} pairs to align"
+            f"estimate: {e['cpu_hours']:.2f} CPU-hours; {e['hours_here']:.2f} hours here when "
+            f"idle, {e['hours_gpu']:.2f} with a GPU ({e['translator_steps']} translator "
+            f"steps at {rate['translator']:.2f} per CPU-second, drawing examples not counted; "
+            f"{e['fast_steps']} fast steps at {rate['fast']:.1f}; the translator at "
+            f"{e['gpu_translator_steps_per_s']} steps/s on a GPU, as recorded on an H200; "
+            f"{e['pairs_to_align']} pairs to align)"
         )
     for w in report.warnings:
         lines.append(f"warning: {w}")

@@ -212,8 +212,8 @@ def test_rows_that_cannot_be_read_are_problems(tmp_path):
 def test_the_estimate_is_measured_here(good_library):
     report = LC.check(good_library, translator_steps=1000)
     e = report.estimate
-    assert e["steps_per_s_here"]["translator"] > 0 and e["steps_per_s_here"]["fast"] > 0
-    assert e["hours_here"] > e["hours_gpu"] > 0
+    assert e["steps_per_cpu_s"]["translator"] > 0 and e["steps_per_cpu_s"]["fast"] > 0
+    assert e["cpu_hours"] > e["hours_here"] > e["hours_gpu"] > 0
     assert e["fast_steps"] == 2 * LC.FAST_STEPS
 
 
