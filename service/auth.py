@@ -34,7 +34,7 @@ from starlette.datastructures import Headers
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from service.api_keys import KeysFile
+from service.api_keys import ApiKey, KeysFile
 from service.config import Settings
 from service.errors import (
     Forbidden,
@@ -44,7 +44,8 @@ from service.errors import (
     problem_responses,
     service_error_response,
 )
-from service.key_limits import KeyLimits
+from service.key_limits import KeyLimits, Slot
+from service.log import key_name_var
 
 logger = logging.getLogger(__name__)
 
@@ -140,79 +141,76 @@ class ApiKeyMiddleware:
         if scope["type"] != "http" or is_open(scope["path"], self.metrics_open):
             await self.app(scope, receive, send)
             return
-
-        async def refuse(error: ServiceError) -> None:
-            await service_error_response(scope, error)(scope, receive, send)
-
         presented = presented_key(scope)
         if presented is None:
-            await refuse(
-                Unauthorized(
-                    "this service needs an API key: send 'Authorization: Bearer KEY' or "
-                    "'X-API-Key: KEY'",
-                    headers={"WWW-Authenticate": REALM},
-                )
+            error = Unauthorized(
+                "this service needs an API key: send 'Authorization: Bearer KEY' or "
+                "'X-API-Key: KEY'",
+                headers={"WWW-Authenticate": REALM},
             )
+            await service_error_response(scope, error)(scope, receive, send)
             return
         entry = self.keys.identify(presented)
         del presented
         if entry is None:
-            await refuse(
-                Unauthorized(
-                    "the API key is not known to this service (or it was revoked)",
-                    headers={"WWW-Authenticate": f'{REALM}, error="invalid_token"'},
-                )
+            error = Unauthorized(
+                "the API key is not known to this service (or it was revoked)",
+                headers={"WWW-Authenticate": f'{REALM}, error="invalid_token"'},
             )
+            await service_error_response(scope, error)(scope, receive, send)
             return
         scope.setdefault("state", {})["key_name"] = entry.name
+        token = key_name_var.set(entry.name)
+        try:
+            slot = self._admit(scope, entry)
+            if isinstance(slot, ServiceError):
+                await service_error_response(scope, slot)(scope, receive, send)
+                return
+            try:
+                await self.app(scope, receive, send)
+            finally:
+                slot.release()
+        finally:
+            key_name_var.reset(token)
 
+    def _admit(self, scope: Scope, entry: ApiKey) -> Slot | ServiceError:
+        """One of ``entry``'s slots, held for the request, when it may make it now; else
+        the 403 or 429 to answer."""
         needed = required_scope(scope)
         if not entry.allows(needed):
-            await refuse(
-                Forbidden(
-                    f"the key {entry.name!r} has the scopes {', '.join(sorted(entry.scopes))}; "
-                    f"{scope['method']} {scope['path']} needs {needed!r}",
-                    headers={
-                        "WWW-Authenticate": f'{REALM}, error="insufficient_scope", scope="{needed}"'
-                    },
-                    required_scope=needed,
-                    key_name=entry.name,
-                )
+            return Forbidden(
+                f"the key {entry.name!r} has the scopes {', '.join(sorted(entry.scopes))}; "
+                f"{scope['method']} {scope['path']} needs {needed!r}",
+                headers={
+                    "WWW-Authenticate": f'{REALM}, error="insufficient_scope", scope="{needed}"'
+                },
+                required_scope=needed,
+                key_name=entry.name,
             )
-            return
-
         slot = self.limits.acquire(entry.name)
         if slot is None:
             limit = self.limits.max_concurrent
-            await refuse(
-                TooManyRequests(
-                    f"the key {entry.name!r} has {limit} requests in progress, its most "
-                    "(key_max_concurrent)",
-                    headers={"Retry-After": "1"},
-                    limit=limit,
-                    limit_name="key_max_concurrent",
-                    key_name=entry.name,
-                )
+            return TooManyRequests(
+                f"the key {entry.name!r} has {limit} requests in progress, its most "
+                "(key_max_concurrent)",
+                headers={"Retry-After": "1"},
+                limit=limit,
+                limit_name="key_max_concurrent",
+                key_name=entry.name,
             )
-            return
-        try:
-            wait = self.limits.take(entry.name)
-            if wait > 0:
-                per_minute = self.limits.per_second * 60.0
-                await refuse(
-                    TooManyRequests(
-                        f"the key {entry.name!r} is over its {per_minute:g} requests a minute "
-                        f"(key_requests_per_minute): retry in {math.ceil(wait)} s",
-                        headers={"Retry-After": str(max(1, math.ceil(wait)))},
-                        limit=per_minute,
-                        limit_name="key_requests_per_minute",
-                        key_name=entry.name,
-                    )
-                )
-                return
-            await self.app(scope, receive, send)
-        finally:
+        wait = self.limits.take(entry.name)
+        if wait > 0:
             slot.release()
+            per_minute = self.limits.per_second * 60.0
+            return TooManyRequests(
+                f"the key {entry.name!r} is over its {per_minute:g} requests a minute "
+                f"(key_requests_per_minute): retry in {math.ceil(wait)} s",
+                headers={"Retry-After": str(max(1, math.ceil(wait)))},
+                limit=per_minute,
+                limit_name="key_requests_per_minute",
+                key_name=entry.name,
+            )
+        return slot
 
 
 def _document_security(app: FastAPI, metrics_open: bool) -> None:

@@ -22,6 +22,9 @@ from contextvars import ContextVar
 from typing import Any
 
 request_id_var: ContextVar[str] = ContextVar("request_id", default="-")
+# the name of the request's API key (service.auth sets it; never the key): log lines of the
+# request carry it as ``key``, and the inference pool shares its slots fairly between keys
+key_name_var: ContextVar[str | None] = ContextVar("key_name", default=None)
 
 FORMAT = "%(asctime)s %(levelname)s %(name)s [%(request_id)s] %(message)s"
 
@@ -32,6 +35,9 @@ class RequestIdFilter(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
         if not hasattr(record, "request_id"):
             record.request_id = request_id_var.get()
+        key = key_name_var.get()
+        if key is not None and not hasattr(record, "key"):
+            record.key = key
         return True
 
 

@@ -108,7 +108,13 @@ class RequestContextMiddleware:
         try:
             await self.app(scope, receive, send_with_id)
         except Exception:
-            error_logger.exception("unhandled error in %s %s", scope["method"], scope["path"])
+            key = scope["state"].get("key_name")  # the API key's name (service.auth)
+            error_logger.exception(
+                "unhandled error in %s %s",
+                scope["method"],
+                scope["path"],
+                extra={"key": key} if key is not None else None,
+            )
             if status:  # the response had started: nothing sensible left to send
                 raise
             await internal_error_response(scope)(scope, receive, send_with_id)

@@ -9,11 +9,13 @@ the key in a whole run's logs, problems and metrics) is ``test_api_keys_workers.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import os
 import subprocess
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -22,7 +24,9 @@ import pytest
 from service import api_keys, keys_cli
 from service.auth import log_startup
 from service.config import Settings
+from service.inference import InferenceRunner
 from service.key_limits import KeyLimits
+from service.log import RequestIdFilter, key_name_var
 from service.main import create_app
 from tests.api.helpers import assert_problem
 from tests.rigs import FIXTURE
@@ -276,9 +280,12 @@ def test_an_error_trace_holds_no_key(make_client, tmp_path, caplog):
         Settings(api_keys_file=keys_file), setup=failing_route, wait=False,
         raise_server_exceptions=False,
     )  # fmt: skip
+    caplog.handler.addFilter(RequestIdFilter())
     with caplog.at_level(logging.DEBUG):
         r = client.get("/v1/_test/boom", headers={"X-API-Key": key})
     assert_problem(r, 500, "internal-error")
+    (failure,) = [rec for rec in caplog.records if rec.exc_info]
+    assert failure.key == "tracer"  # the failure's log line names the key
     logged = caplog.text + "".join(
         logging.Formatter().formatException(rec.exc_info) for rec in caplog.records if rec.exc_info
     )
@@ -302,6 +309,43 @@ def test_routes_whose_scope_cannot_be_read_need_manage(make_client, tmp_path, ca
         assert_problem(client.get("/v1/nowhere", headers=bearer(user)), 403, "forbidden")
     assert "every route needs 'manage'" in caplog.text
     assert client.get("/v1/nowhere", headers=bearer(admin)).status_code == 404
+
+
+def test_a_freed_inference_slot_goes_to_the_key_that_waited_not_the_one_with_the_queue():
+    """One slot: ``busy`` holds it with four more requests waiting when ``calm`` asks; the
+    slot goes to ``calm`` next, not after ``busy``'s queue (which is served in order)."""
+    runner = InferenceRunner(1, timeout_s=10, queue_wait_s=10, max_queued=16)
+    runner.start()
+    order: list[str] = []
+    gate = threading.Event()
+
+    async def call(key: str, label: str) -> None:
+        key_name_var.set(key)  # in this task's own context, as the middleware does
+
+        def work() -> None:
+            if label == "busy-0":
+                gate.wait(5)
+            order.append(label)
+
+        await runner.run(work)
+
+    async def scenario() -> None:
+        first = asyncio.ensure_future(call("busy", "busy-0"))
+        await asyncio.sleep(0.05)
+        tasks = [asyncio.ensure_future(call("busy", f"busy-{i}")) for i in range(1, 5)]
+        await asyncio.sleep(0.05)
+        tasks.append(asyncio.ensure_future(call("calm", "calm")))
+        await asyncio.sleep(0.05)
+        assert (runner.running, runner.queued) == (1, 5)
+        gate.set()
+        await asyncio.gather(first, *tasks)
+
+    try:
+        asyncio.run(scenario())
+    finally:
+        runner.close()
+    assert order == ["busy-0", "calm", "busy-1", "busy-2", "busy-3", "busy-4"]
+    assert (runner.running, runner.queued) == (0, 0)
 
 
 def test_openapi_names_the_key_schemes_and_each_routes_scope(keyed):
