@@ -75,13 +75,18 @@ export-fast: $(VENV)/.dev
 
 # Both style families on motion from outside Bandai (CMU, Xia, CMU dance, other rigs' exports)
 # judged by a style classifier of every real Bandai take (training/eval_foreign.py): the
-# development half by default; EVAL_FOREIGN_ARGS="--half test" (or both, --manifest) for more.
+# development half by default; EVAL_FOREIGN_ARGS="--half test" (or both) for more.
 # Writes runs/eval/foreign-<half>.json; the judge is the committed training/foreign_judge.pt
-# (EVAL_FOREIGN_ARGS=--pin-judge trains and replaces it).
+# (EVAL_FOREIGN_ARGS=--pin-judge trains and replaces it). record-evaluations puts the test
+# half's figures in the manifest.
 EVAL_FOREIGN_ARGS ?=
-.PHONY: eval-foreign
+.PHONY: eval-foreign record-evaluations
 eval-foreign: $(VENV)/.dev
 	$(PY) -m training.eval_foreign $(EVAL_FOREIGN_ARGS)
+
+# The evaluations write JSON; this one step records their figures in the models' entries.
+record-evaluations: $(VENV)/.dev
+	$(PY) -m model_export.evaluations $(wildcard runs/eval/foreign-test.json runs/eval/dance.json)
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast
@@ -108,7 +113,8 @@ export-dance: $(VENV)/.dev
 	$(PY) -m model_export.dance
 
 eval-dance: $(VENV)/.dev
-	$(PY) -m training.eval_dance --json runs/eval/dance.json --manifest
+	$(PY) -m training.eval_dance --json runs/eval/dance.json
+	$(PY) -m model_export.evaluations runs/eval/dance.json
 
 show-dance: $(VENV)/.dev
 	$(PY) -m training.show_dance

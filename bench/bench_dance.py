@@ -6,7 +6,7 @@ frames per second of the result for a 3-minute song, and the milliseconds of eac
 One run = what ``POST /v1/dance`` does after reading the upload: decode the audio ->
 per-frame features and beats -> audio network -> the step network run autoregressively
 in onnxruntime for every frame -> smoothing and decoding -> beat warp -> foot clean-up
-(IK) -> write the BVH. The song is synthetic (``tests/songs.py``: drums, bass, chords at
+(IK) -> write the BVH. The song is synthetic (``training/songs.py``: drums, bass, chords at
 112 bpm) so the figure does not depend on the shared data. Uses the shipped
 ``models/dance``; no torch.
 """
@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> dict:
     from service.engines.dance import DanceEngine, DanceJob
     from service.manifest import load_manifest
     from service.metrics import StageTimer
-    from tests.songs import encoded, song
+    from training.songs import encoded, song
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seconds", type=float, default=180.0)

@@ -11,7 +11,7 @@ and waits for ``/readyz``. Requests, one family at a time:
 
 - fast: ``POST /v1/stylize``, a BVH content clip and the first fast style of ``/v1/styles``;
 - translator: ``POST /v1/transfer``, the same clip and the first translator ``style_name``;
-- dance: ``POST /v1/dance``, a synthetic song (``tests/songs.py``, WAV) of 8, 32 or 128 s,
+- dance: ``POST /v1/dance``, a synthetic song (``training/songs.py``, WAV) of 8, 32 or 128 s,
   i.e. 240, 960 or 3,840 frames at 30 fps.
 
 The content clip is a Bandai walk (shared data) when present, else the CMU fixture, looped
@@ -134,7 +134,7 @@ def content_clip(frames: int, data_dir: Path) -> tuple[str, bytes]:
 
 def song_clip(frames: int) -> tuple[str, bytes]:
     """``(description, WAV bytes)`` of a synthetic song that gives ``frames`` frames at 30 fps."""
-    from tests.songs import encoded, song
+    from training.songs import encoded, song
 
     seconds = frames / FPS
     return f"synthetic song {seconds:g} s WAV", encoded(song(seconds), "WAV")
@@ -329,7 +329,7 @@ def _ms(value: float | None) -> str:
 def main(argv: list[str] | None = None) -> dict:
     from service.config import Settings, available_cpus
     from service.manifest import load_manifest
-    from tests.conftest import DATA_DIR
+    from training.data import data_dir
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeats", type=int, default=10, help="requests per latency case")
@@ -374,7 +374,7 @@ def main(argv: list[str] | None = None) -> dict:
                 styles[family] = names[0]
         lengths = list(dict.fromkeys(args.lengths))
         tp_lengths = [args.throughput_frames] if args.clients else []
-        cases = build_cases(families, list(dict.fromkeys(lengths + tp_lengths)), styles, DATA_DIR)
+        cases = build_cases(families, list(dict.fromkeys(lengths + tp_lengths)), styles, data_dir())
         errors: list[str] = []
         rows = []
         for family in families:

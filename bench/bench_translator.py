@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> dict:
     from service.manifest import load_manifest
     from service.metrics import StageTimer
     from service.requests import StyleSource, TransferRequest
-    from tests.conftest import DATA_DIR
+    from training.data import data_dir
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--frames", type=int, default=240)
@@ -62,8 +62,8 @@ def main(argv: list[str] | None = None) -> dict:
     engine = TranslatorEngine(entry, settings.models_dir, settings)
     engine.load()
     name = args.style_name or engine.style_names[0]
-    what, data = content_clip(args.frames, DATA_DIR)
-    style_file = DATA_DIR / "bandai" / "dataset-1" / "dataset-1_run_tired_001.bvh"
+    what, data = content_clip(args.frames, data_dir())
+    style_file = data_dir() / "bandai" / "dataset-1" / "dataset-1_run_tired_001.bvh"
     inputs = {"style_name": StyleSource("style_name", name=name)}
     if style_file.exists():
         inputs["style_clip"] = StyleSource(

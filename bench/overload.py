@@ -46,7 +46,7 @@ def send(host: str, port: int, body: bytes, content_type: str) -> tuple[int, str
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tests.conftest import DATA_DIR
+    from training.data import data_dir
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--clients", type=int, default=48)
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-wait", type=float, default=30.0, help="seconds; longer fails")
     args = p.parse_args(argv)
 
-    what, clip = content_clip(args.frames, DATA_DIR)
+    what, clip = content_clip(args.frames, data_dir())
     process, url = _start_server(1)
     try:
         parts = urlsplit(url)

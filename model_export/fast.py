@@ -10,7 +10,7 @@ names' aliases taken from the shipped translator (the networks' teacher,
 ``training.fast_style``). Weights are stored as float16 (:func:`store_half`). Each graph is
 checked against torch, its weights rounded as stored, at several lengths and batch sizes
 (``PARITY_SHAPES``, rtol 1e-4) before it is listed. The entry's output smoothing is then
-measured on the exported networks (``training.output_smoothing``; needs the shared data)
+measured on the exported networks (``model_export.output_smoothing``; needs the shared data)
 unless ``--output-smoothing`` sets it.
 """
 
@@ -26,9 +26,9 @@ import numpy as np
 import torch
 
 from model_export import manifest as MF
+from model_export import output_smoothing
 from motion import features as Fe
 from training import fast_common as FC
-from training import output_smoothing
 
 OPSET = 17
 PARITY_SHAPES = [(b, t) for t in (32, 100, 241) for b in (1, 3)]
@@ -266,11 +266,10 @@ def export(
         }
         | (extra or {}),
     }
+    if smoothing is None:
+        output_smoothing.measured("fast", entry, models_dir)
     MF.put_entry(entry, models_dir)
     print(f"manifest: {name} with {len(styles)} styles, {len(files)} files", flush=True)
-    if smoothing is None:
-        sigma = output_smoothing.choose("fast", models_dir, exporting=True)
-        entry["extra"]["output_smoothing"] = sigma
     return entry
 
 

@@ -39,14 +39,7 @@ def put_entry(
     of the same name (and, with ``replace_prefix``, every entry whose name starts with it).
     Returns the validated entry."""
     models_dir = Path(models_dir)
-    entry = dict(entry)
-    files = []
-    for item in entry["files"]:
-        path = item if isinstance(item, str) else item["path"]
-        files.append({"path": path, "sha256": sha256_of(models_dir / path)})
-    entry["files"] = files
-    model = ModelEntry.model_validate(entry)
-
+    model = validated_entry(entry, models_dir)
     path = models_dir / MANIFEST_NAME
     if path.exists():
         doc = json.loads(path.read_text())
@@ -61,6 +54,16 @@ def put_entry(
     models.append(model.model_dump(mode="json"))
     _write(path, {"schema_version": SCHEMA_VERSION, "models": models})
     return model
+
+
+def validated_entry(entry: dict[str, Any], models_dir: Path = MODELS_DIR) -> ModelEntry:
+    """``entry`` with its files hashed (a list of paths, or of ``{"path"}`` dicts, relative
+    to ``models_dir``), validated against the service's schema."""
+    files = []
+    for item in entry["files"]:
+        path = item if isinstance(item, str) else item["path"]
+        files.append({"path": path, "sha256": sha256_of(Path(models_dir) / path)})
+    return ModelEntry.model_validate({**entry, "files": files})
 
 
 def dated_version(name: str, models_dir: Path = MODELS_DIR) -> str:
@@ -117,31 +120,6 @@ def _entry_at(doc: dict[str, Any], name: str, version: str) -> dict[str, Any]:
         found = None if entry is None else entry.get("version")
         raise ValueError(f"manifest has {name!r} at version {found!r}, not {version!r}")
     return entry
-
-
-def measuring_machine() -> str:
-    """The CPU and BLAS kernels an evaluation ran on, recorded with its figures: the same
-    code trained classifiers on another CPU that judged one translator up to 0.8 points
-    apart and the real targets' content 2.6 apart (OpenBLAS picks its kernels by CPU), so
-    recorded figures compare only between models measured on one machine."""
-    import platform
-
-    from threadpoolctl import threadpool_info
-
-    try:
-        info = Path("/proc/cpuinfo").read_text().splitlines()
-    except OSError:
-        info = []
-    names = [line.split(":", 1)[1].strip() for line in info if line.startswith("model name")]
-    cpu = (names[0] if names else "") or platform.processor() or platform.machine()
-    kernels = sorted(
-        {
-            f"{i['internal_api']} {i['architecture']}"
-            for i in threadpool_info()
-            if i.get("architecture")
-        }
-    )
-    return f"{cpu}, {os.cpu_count()} cores; BLAS kernels: {', '.join(kernels) or 'unknown'}"
 
 
 def _write(path: Path, doc: dict[str, Any]) -> None:

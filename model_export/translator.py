@@ -17,8 +17,8 @@ Writes ``models/translator/``:
   (:func:`style_speeds`), a named style's time warp;
 
 and the manifest entry ``translator-bandai`` (``model_export.manifest.put_entry``), with the
-output smoothing ``training.output_smoothing`` measures for the new graphs (Bandai's
-held-out takes: the export needs the shared data).
+output smoothing ``model_export.output_smoothing`` measures for the new graphs before the
+entry is written (Bandai's held-out takes: the export needs the shared data).
 The checkpoint is read from a copy (a running training overwrites it).
 """
 
@@ -36,9 +36,9 @@ import numpy as np
 import torch
 
 from model_export import manifest as MF
+from model_export import output_smoothing
 from motion import features as Fe
 from motion.styles import exaggerated
-from training import output_smoothing
 from training.translator.networks import RESTYLER_IN, NetworkConfig, Translator
 
 OPSET = 17
@@ -377,19 +377,17 @@ def export(
             "clip_style_gain": CLIP_STYLE_GAIN,
             "video_style_gain": VIDEO_STYLE_GAIN,
             "styles": styles,
-            "output_smoothing": max(output_smoothing.CANDIDATES),  # until measured below
+            "output_smoothing": max(output_smoothing.CANDIDATES),  # unless measured below
         }
         | (extra or {}),
     }
     if payload.get("validation"):
         entry["metrics"]["validation"] = payload["validation"]
+    if measure_smoothing:
+        output_smoothing.measured("translator", entry, models_dir)
     MF.put_entry(entry, models_dir)
     sizes = {p.name: p.stat().st_size for p in paths.values()}
     print(f"manifest: {name} {entry['version']}, graphs {sizes} bytes", flush=True)
-    if measure_smoothing:
-        entry["extra"]["output_smoothing"] = output_smoothing.choose(
-            "translator", models_dir, exporting=True
-        )
     return entry
 
 

@@ -1,6 +1,9 @@
 """Evaluation of the shipped dance model (jacob2019 made to work).
 
-    python -m training.eval_dance [--seeds 3] [--json PATH] [--manifest] [--quick]
+    python -m training.eval_dance [--seeds 3] [--json PATH] [--quick]
+
+(``python -m model_export.evaluations PATH`` then records the report in the model's
+manifest entry.)
 
 Everything runs through the shipped engine exactly as ``POST /v1/dance`` does (features and
 beats, onnxruntime step loop, smoothing, stalls livened up, beat warp, foot clean-up).
@@ -10,7 +13,7 @@ reports: the AIST++ score (each kinematic beat, a local minimum of joint speed, 
 chance level (the same kinematic beats against the beat grid shifted by random fractions of
 a beat). Parts:
 
-- **generated beat test set** (``tests/songs.beat_test_set``: 8 drum patterns x 5 tempi,
+- **generated beat test set** (``training/songs.beat_test_set``: 8 drum patterns x 5 tempi,
   70-180 bpm, 60 s, beats known): the tracker's beat F-measure (70 ms; strict, and at any
   metrical level: against the known beats, every other one, or the off-beats added), its
   tempo, downbeat F-measure; the dance's beat alignment against the *known* beats beside
@@ -55,6 +58,7 @@ from motion.skeleton import Motion
 from service.engines.dance import DanceJob
 from service.metrics import StageTimer
 from training import dance_metrics as DM
+from training.measuring_machine import measuring_machine
 
 TEN_MINUTES = 600.0
 BLOCK = 30.0  # seconds per energy block
@@ -115,7 +119,7 @@ def any_level_f_measure(estimated: np.ndarray, reference: np.ndarray) -> float:
 
 def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
     """The beat test set: tracker and dance per pattern and tempo."""
-    from tests.songs import beat_test_set
+    from training.songs import beat_test_set
 
     rows = []
     for i, song in enumerate(songs if songs is not None else beat_test_set()):
@@ -399,6 +403,8 @@ def evaluate(
         "model_name": entry.name,
         "model_version": entry.version,
         "seeds": seeds,
+        "machine": measuring_machine(),
+        "measured": time.strftime("%Y-%m-%d"),
     }
     report["generated_set"] = generated_set(engine, 1, log, test_songs)
     report["shared_songs"] = shared_songs(engine, log, names=shared_names)
@@ -539,16 +545,10 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="one seed, two patterns, the held-out songs only: a smoke run",
     )
-    p.add_argument(
-        "--manifest",
-        action="store_true",
-        help="also record the figures in the model's manifest entry "
-        "(metrics.evaluation.held_out_songs), so they travel with the model",
-    )
     args = p.parse_args(argv)
     if args.quick:
-        from tests.songs import beat_test_set
         from training.dance import VAL_TAKES
+        from training.songs import beat_test_set
 
         songs = beat_test_set(patterns=("four_on_the_floor", "break"))
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
@@ -559,52 +559,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1))
-    if args.manifest and not args.quick:
-        from service.config import Settings
-
-        record_in_manifest(report, Settings().models_dir)
     return 0
-
-
-def record_in_manifest(report: dict, models_dir: Path) -> None:
-    """The report's summary figures into its model's manifest entry (refused for another
-    version of the model; a new export drops them)."""
-    from model_export.manifest import measuring_machine, put_evaluation
-
-    gen = report["generated_set"]["songs"]
-    shared = report["shared_songs"]
-    figures = {
-        "songs": len(report["songs"]),
-        "seeds": report["seeds"],
-        "beat_alignment": report["beat_alignment"],
-        "foot_sliding_cm_s": report["foot_sliding_cm_s"],
-        "foot_contact_score": report["foot_contact_score"],
-        "feature_distances_test_half": report["feature_distances"]["test"],
-        "genre_accuracy": {k: v for k, v in report["genre_accuracy"].items() if k != "confusion"},
-        "ten_minutes": {k: v for k, v in report["ten_minutes"].items() if k != "per_seed"},
-        "generated_set": {
-            "songs": len(gen),
-            "tracker_f_measure": round(float(np.mean([r["f_measure"] for r in gen])), 3),
-            "passing": sum(r["passes"] for r in gen),
-            "stalls": sum(d["stalls"] for r in gen for d in r["dances"]),
-        },
-        "shared_songs": {
-            "songs": len(shared),
-            "bas": round(float(np.mean([r["bas"] for r in shared.values()])), 4),
-            "chance": round(float(np.mean([r["chance"] for r in shared.values()])), 4),
-            "stalls": sum(r["stalls"] for r in shared.values()),
-        },
-        "measured": time.strftime("%Y-%m-%d"),
-        "machine": measuring_machine(),
-        "by": "python -m training.eval_dance (beat alignment: motion.beat_warp.alignment, AIST++ "
-        "score vs shifted grids; foot sliding in cm/s; foot contact: EDGE's physical foot "
-        "contact score; feature distances: AIST++ kinetic and geometric features of 5-s pieces, "
-        "Frechet distance, test half = second half of each held-out song; genre: logistic "
-        "regression on real training-song dances)",
-    }
-    put_evaluation(
-        report["model_name"], report["model_version"], "held_out_songs", figures, models_dir
-    )
 
 
 if __name__ == "__main__":

@@ -2,11 +2,10 @@
 
     python -m training.eval_foreign [--half dev|test|both] [--families translator fast]
         [--judge FILE | --pin-judge] [--classifier-cache DIR] [--out-dir DIR] [--limit N]
-        [--manifest]
 
 writes ``foreign-<half>.json`` for each half judged (default ``runs/eval/``) and prints its
-tables; ``--manifest`` records the test half's figures in each model's manifest entry
-(``metrics.evaluation.foreign_test_half``).
+tables; ``python -m model_export.evaluations runs/eval/foreign-test.json`` records the test
+half's figures in each model's manifest entry (``metrics.evaluation.foreign_test_half``).
 
 Content: the shared CMU 31-joint takes, Xia's clips and the CMU dance takes (43-joint and
 3ds Max layouts; 05_20, in both CMU folders, once), canonical at 30 fps through
@@ -108,8 +107,9 @@ from training import judges
 from training.judges import (
     ConvClipClassifier,
     frame_features,
-    jerk,
+    held_out_jitter,
     load_engine,
+    segments,
     skating,
     style_names,
     transfer,
@@ -133,8 +133,6 @@ EVALUATION_KEY = {
     "translator-video-unseen": "foreign_test_half_unseen_style_videos",
 }
 HALVES = ("dev", "test")
-SEGMENT_FRAMES = 240  # 8 s at 30 fps
-MAX_SEGMENTS = 4
 VARIANT_FOLDERS, VARIANT_TAKES = ("cmu-31", "xia"), 2  # takes per folder and half
 T_POSE_FIRST = ("cmu-31",)  # folders whose files open with cgspeed's synthetic T-pose frame
 EFFECTORS = [C.INDEX[n] for n in ("Hand_L", "Hand_R", "Foot_L", "Foot_R")]
@@ -194,28 +192,14 @@ def split_halves(takes: dict[str, list[str]]) -> dict[str, str]:
     return half_of
 
 
-def segments(
-    motion: Motion, frames: int = SEGMENT_FRAMES, most: int = MAX_SEGMENTS
-) -> list[Motion]:
-    """``motion`` cut into equal parts of at most ``frames`` frames; when that takes more
-    than ``most`` parts, ``most`` windows of ``frames`` frames spread evenly over it."""
-    total = motion.num_frames
-    count = -(-total // frames)
-    if count <= most:
-        bounds = np.round(np.linspace(0, total, count + 1)).astype(int)
-        return [motion.slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-    starts = np.round(np.linspace(0, total - frames, most)).astype(int)
-    return [motion.slice(s, s + frames) for s in starts]
-
-
 def rig_variants(motion: Motion) -> dict[str, Motion]:
     """A CMU 31-joint ``motion`` as other tools export it: Mixamo names and ``ZXY``
     channels; Unreal names, an extra root, Z up and in metres."""
-    from tests import rigs
+    from training import rig_variants as RV
 
-    mixamo = rigs.with_channels(rigs.renamed(motion, rigs.CMU_TO_MIXAMO), "ZXY")
-    unreal = rigs.renamed(motion, rigs.CMU_TO_UNREAL)
-    unreal = rigs.with_extra_root(rigs.scaled(rigs.z_up(unreal), 0.01))
+    mixamo = RV.with_channels(RV.renamed(motion, RV.CMU_TO_MIXAMO), "ZXY")
+    unreal = RV.renamed(motion, RV.CMU_TO_UNREAL)
+    unreal = RV.with_extra_root(RV.scaled(RV.z_up(unreal), 0.01))
     return {"mixamo": mixamo, "unreal-z-up-m": unreal}
 
 
@@ -599,37 +583,6 @@ def real_bandai(clips: list) -> RealBandai:
     )
 
 
-def held_out_jitter(family: str, engine, clips: list) -> dict:
-    """How much a family's output jerks against real mocap with the same timing: each of
-    Bandai's held-out dataset-2 takes (``training.translator.fit.held_out_take``, never
-    trained on as content), its first 8 s restyled to its own style without the time warp,
-    against the take itself. ``ratio`` 1: as smooth as the real performance; jitter from
-    any step (the window blend, the foot clean-up) raises it, the output smoothing lowers
-    it. Foreign content
-    cannot say this: its mocap is noisier than Bandai's, and nothing real has its
-    timing in another style."""
-    from training.translator.fit import held_out_take
-
-    takes = [c for c in clips if held_out_take(c.name)]
-    if not takes:
-        styles = ", ".join(sorted({c.style for c in clips}))
-        raise ValueError(
-            f"{family}: no held-out Bandai take is in one of its styles ({styles}) "
-            "to measure its jitter on"
-        )
-    real, out = [], []
-    for c in takes:
-        content = segments(c.motion)[0]
-        real.append(jerk(content))
-        out.append(jerk(transfer(family, engine, content, c.style, time_warp=False)))
-    return {
-        "takes": len(takes),
-        "real_m_s3": round(float(np.mean(real)), 1),
-        "output_m_s3": round(float(np.mean(out)), 1),
-        "ratio": round(float(np.mean(out) / np.mean(real)), 3),
-    }
-
-
 # --------------------------------------------------------------------------- families
 
 
@@ -882,8 +835,8 @@ def evaluate(
     N items of each half (a smoke run). The judge is the ``pinned`` file where it exists,
     else trained (and kept in ``classifier_cache``); ``pin`` writes it to
     :data:`PINNED_JUDGE`."""
-    from model_export.manifest import measuring_machine
     from training.data import load_bandai
+    from training.measuring_machine import measuring_machine
 
     started = time.time()
     clips = load_bandai()
@@ -945,6 +898,7 @@ def evaluate(
                 "foot_sliding_cm_s": round(real.sliding, 2),
             },
             "machine": measuring_machine(),
+            "measured": time.strftime("%Y-%m-%d"),
             "seconds": {**seconds, "total": round(time.time() - started, 1)},
         }
     return reports
@@ -1087,46 +1041,6 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
-def record_in_manifest(report: dict, models_dir: Path) -> None:
-    """The test half's headline figures into each judged model's manifest entry
-    (``metrics.evaluation.foreign_test_half``)."""
-    from model_export.manifest import measuring_machine, put_evaluation
-
-    if report["half"] != "test":
-        raise ValueError(f"the manifest records the test half, not {report['half']!r}")
-    keep = (
-        "n",
-        "top1",
-        "top3",
-        "top1_mean_per_style",
-        "recall",
-        "most_predicted",
-        "most_predicted_share",
-        "spread_ratio",
-        "content_kept",
-        "content_kept_share",
-        "foot_sliding_cm_s",
-        "intervals_90",
-    )
-    real = report["real_bandai"]
-    for family, figures in report["families"].items():
-        put_evaluation(
-            figures["model_name"],
-            figures["model_version"],
-            EVALUATION_KEY.get(family, "foreign_test_half"),
-            {
-                **{k: figures[k] for k in keep},
-                "items": report["items"],
-                "real_leave_action_out_top1": real["leave_action_out"]["top1"],
-                "real_foot_sliding_cm_s": real["foot_sliding_cm_s"],
-                "measured": time.strftime("%Y-%m-%d"),
-                "machine": measuring_machine(),
-                "by": "python -m training.eval_foreign (16 merged styles)",
-            },
-            models_dir,
-        )
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--half", choices=(*HALVES, "both"), default="dev")
@@ -1152,15 +1066,8 @@ def main(argv: list[str] | None = None) -> int:
         help="train a judge (or take the cached one) and write it to the committed file",
     )
     p.add_argument("--limit", type=int, default=None, help="only the first N items of each half")
-    p.add_argument(
-        "--manifest",
-        action="store_true",
-        help="record the test half's figures in each model's manifest entry",
-    )
     args = p.parse_args(argv)
     halves = HALVES if args.half == "both" else (args.half,)
-    if args.manifest and ("test" not in halves or args.limit):
-        p.error("--manifest records the whole test half: use --half test or both, no --limit")
     reports = evaluate(
         halves,
         tuple(args.families),
@@ -1174,10 +1081,6 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(markdown(report))
         (args.out_dir / f"foreign-{h}.json").write_text(json.dumps(report, indent=1))
-    if args.manifest:
-        from service.config import Settings
-
-        record_in_manifest(reports["test"], Settings().models_dir)
     return 0
 
 

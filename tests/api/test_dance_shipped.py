@@ -16,7 +16,7 @@ from motion import retarget as R
 from service.config import Settings
 from service.manifest import load_manifest
 from tests.rigs import FIXTURE
-from tests.songs import encoded, song
+from training.songs import encoded, song
 
 SHIPPED = Settings().models_dir
 pytestmark = pytest.mark.skipif(

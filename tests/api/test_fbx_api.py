@@ -21,7 +21,7 @@ from service.config import Settings
 from tests.api.helpers import assert_problem
 from tests.fbx_files import blender_reads, make_fbx_files, require_bpy
 from tests.rigs import FIXTURE
-from tests.songs import encoded, song
+from training.songs import encoded, song
 
 OCTET = "application/octet-stream"
 SONG_SECONDS = 2.0

@@ -29,7 +29,7 @@ from tests.gltf_files import (
     three_js_summary,
 )
 from tests.rigs import FIXTURE
-from tests.songs import encoded, song
+from training.songs import encoded, song
 
 GLB = "model/gltf-binary"
 SONG_SECONDS = 3.0

@@ -16,8 +16,8 @@ from service.config import Settings
 from service.manifest import load_manifest
 from tests import rigs
 from tests.api.helpers import assert_problem
-from tests.songs import encoded, song
 from tests.unit.test_rig_mapping import featureless
+from training.songs import encoded, song
 
 MODELS = {m.family: m for m in load_manifest(Settings().models_dir).models}
 pytestmark = pytest.mark.skipif(

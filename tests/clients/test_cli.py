@@ -19,7 +19,7 @@ import soundfile
 from motion import bvh
 from tests.rigs import load_fixture, variants
 from tests.server import ServerProcess
-from tests.songs import SR, song
+from training.songs import SR, song
 
 COMMAND = Path(sys.executable).parent / "motion-style"
 

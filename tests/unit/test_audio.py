@@ -18,7 +18,7 @@ import soundfile
 from motion import audio_decode, audio_features, beat_tracking, spectral
 from motion.errors import MotionError
 from tests.conftest import data_path
-from tests.songs import beat_song
+from training.songs import beat_song
 
 SR = 44100
 

@@ -199,8 +199,8 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     one shared song, one held-out song, two seeds and one minute instead of ten: a full run
     takes many minutes, and its per-seed figures are checked nowhere else."""
     from tests.conftest import data_path, recorded_evaluation
-    from tests.songs import beat_song
     from training import eval_dance as ED
+    from training.songs import beat_song
 
     data_path("dance-with-melody")  # skips without the dance data
     held, train = ED.held_out_songs()
@@ -234,7 +234,9 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     assert ten["slowest_5s_share"] == min(r["slowest_5s_share"] for r in ten["per_seed"])
     text = ED.markdown(report)
     assert "four_on_the_floor" in text and "2 seeds" in text
-    recorded = recorded_evaluation(ED.record_in_manifest, report, tmp_path)
+    from model_export.evaluations import record_dance
+
+    recorded = recorded_evaluation(record_dance, report, tmp_path)
     assert recorded["held_out_songs"]["seeds"] == 2
     assert recorded["held_out_songs"]["generated_set"]["songs"] == 1
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from model_export import evaluations as EV
 from motion import bvh, retarget
 from motion import canonical as C
 from motion import features as Fe
@@ -277,13 +278,13 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     assert "test half" in EF.markdown(report)
     models = tmp_path / "models"
     shutil.copytree(Settings().models_dir, models)
-    EF.record_in_manifest(report, models)
+    EV.record_foreign(report, models)
     for family, figures in report["families"].items():
         entry = next(m for m in load_manifest(models).models if m.name == figures["model_name"])
         recorded = entry.metrics["evaluation"][EF.EVALUATION_KEY.get(family, "foreign_test_half")]
         assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
     with pytest.raises(ValueError, match="test half"):
-        EF.record_in_manifest({**report, "half": "dev"}, models)
+        EV.record_foreign({**report, "half": "dev"}, models)
 
 
 def test_unseen_style_clips_come_only_from_takes_the_encoders_never_trained_on():

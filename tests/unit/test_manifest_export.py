@@ -83,21 +83,25 @@ def test_a_new_export_drops_the_old_evaluation(models):
 
 
 def test_dance_evaluation_records_its_summary(models):
-    from training import eval_dance as ED
+    from model_export import evaluations as EV
+    from training.measuring_machine import measuring_machine
 
     report = {
         "model_name": "translator-test", "model_version": "1", "seeds": 3,
         "songs": {"a": {}, "b": {}},
         "beat_alignment": {"generated": {"bas": 0.55, "chance": 0.27, "n": 6}},
         "foot_sliding_cm_s": {"real": 9.0, "generated": 6.0},
+        "foot_contact_score": {"real": 0.9, "generated": 0.8},
+        "feature_distances": {"test": {"kinetic": 1.5}, "dev": {"kinetic": 9.9}},
         "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25},
         "ten_minutes": {"frames": 18000, "per_30s_min": 26.3},
         "generated_set": {"songs": [
             {"f_measure": 0.9, "passes": True, "dances": [{"stalls": 0}]},
             {"f_measure": 0.7, "passes": False, "dances": [{"stalls": 2}]}]},
         "shared_songs": {"x": {"bas": 0.6, "chance": 0.3, "stalls": 0}},
+        "machine": measuring_machine(),
     }  # fmt: skip
-    ED.record_in_manifest(report, models)
+    EV.record_dance(report, models)
     (model,) = load_manifest(models).models
     figures = model.metrics["evaluation"]["held_out_songs"]
     assert figures["songs"] == 2 and figures["beat_alignment"]["generated"]["bas"] == 0.55
@@ -105,9 +109,11 @@ def test_dance_evaluation_records_its_summary(models):
     assert figures["generated_set"] == {"songs": 2, "tracker_f_measure": 0.8, "passing": 1,
                                         "stalls": 2}  # fmt: skip
     assert figures["shared_songs"]["songs"] == 1
+    assert figures["feature_distances_test_half"] == {"kinetic": 1.5}
+    assert figures["foot_contact_score"]["generated"] == 0.8
     assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
-        ED.record_in_manifest(report | {"model_version": "2"}, models)
+        EV.record_dance(report | {"model_version": "2"}, models)
 
 
 def test_a_second_export_on_one_day_is_a_new_version(models):

@@ -1,4 +1,4 @@
-"""``training.output_smoothing``: the smallest smoothing whose output jerks no more than
+"""``model_export.output_smoothing``: the smallest smoothing whose output jerks no more than
 real mocap, measured on the shipped engines and recorded in their entry."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from training import output_smoothing as OS
+from model_export import output_smoothing as OS
 
 
 def test_the_smallest_sigma_within_the_limit_is_chosen():

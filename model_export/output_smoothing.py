@@ -1,17 +1,18 @@
 """The output smoothing an exported restyling family ships with, chosen without a judge.
 
-    python -m training.output_smoothing translator|fast [--models-dir DIR]
+    python -m model_export.output_smoothing translator|fast [--models-dir DIR]
 
 Both families smooth their network's output rotations over time, a Gaussian of sigma
 frames (``service.engines.restyling.restyled_motion``), against the frame-to-frame
 jitter a network adds; the same smoothing takes the styles' own quick movements (angry's
 flailing, active's pumping). So each exported model gets the smallest sigma of
 :data:`CANDIDATES` at which its output, as the service finishes it, jerks no more than
-real mocap with the same timing (``training.eval_foreign.held_out_jitter``: Bandai's
-held-out takes restyled to their own style). The exports run this after writing their
-entry; it records the sigma (``extra.output_smoothing``) and each candidate's jerk against
-real (``metrics.held_out_jerk``) in that entry, under the version the export gave it.
-Run alone on an exported model, a sigma other than its entry's is a new version.
+real mocap with the same timing (``training.judges.held_out_jitter``: Bandai's held-out
+takes restyled to their own style). The exports measure their new graphs before they write
+the entry (:func:`measured`), so the entry is written once with the sigma
+(``extra.output_smoothing``) and each candidate's jerk against real
+(``metrics.held_out_jerk``). Run alone on an exported model (:func:`choose`), a sigma other
+than its entry's is a new version.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import argparse
 from pathlib import Path
 
 from model_export import manifest as MF
+from training.judges import engine_of, held_out_jitter, load_engine, style_names
 
 CANDIDATES = (0.0, 0.5, 1.0, 1.5, 2.0)  # sigma, frames at 30 fps
 LIMIT = 1.0  # output jerk over the real takes' jerk
@@ -37,8 +39,6 @@ def smallest_within(ratios: dict[float, float], limit: float = LIMIT) -> float:
 def measure(family: str, engine, clips: list, candidates=CANDIDATES) -> dict[float, float]:
     """Each candidate sigma's held-out jerk ratio for ``engine``, loaded as the service
     loads it."""
-    from training.eval_foreign import held_out_jitter
-
     ratios = {}
     for sigma in candidates:
         engine.output_smoothing = sigma
@@ -47,18 +47,35 @@ def measure(family: str, engine, clips: list, candidates=CANDIDATES) -> dict[flo
     return ratios
 
 
-def choose(family: str, models_dir: Path = MF.MODELS_DIR, exporting: bool = False) -> float:
-    """Measure the exported ``family`` in ``models_dir`` and record its smoothing: under
-    the entry's version when ``exporting`` (the export has just written it) or when the
-    sigma is the entry's already, else under a new one (the outputs change)."""
+def _bandai_in(family: str, engine) -> list:
     from training.data import load_bandai
-    from training.judges import load_engine, style_names
 
-    engine, entry, models_dir = load_engine(family, Path(models_dir))
     styles = set(style_names(family, engine))
-    ratios = measure(family, engine, [c for c in load_bandai() if c.style in styles])
+    return [c for c in load_bandai() if c.style in styles]
+
+
+def measured(family: str, entry: dict, models_dir: Path) -> float:
+    """The smoothing of an export's new ``entry`` (its files written, the entry not yet in
+    the manifest), measured on its graphs and set in the entry: ``extra.output_smoothing``
+    and ``metrics.held_out_jerk``."""
+    model = MF.validated_entry(entry, models_dir)
+    engine = engine_of(model, Path(models_dir))
+    ratios = measure(family, engine, _bandai_in(family, engine))
     sigma = smallest_within(ratios)
-    same = exporting or sigma == float(entry.extra["output_smoothing"])
+    entry["extra"]["output_smoothing"] = sigma
+    entry.setdefault("metrics", {})["held_out_jerk"] = {f"{s:g}": r for s, r in ratios.items()}
+    print(f"{entry['name']}: output smoothing sigma {sigma:g}", flush=True)
+    return sigma
+
+
+def choose(family: str, models_dir: Path = MF.MODELS_DIR) -> float:
+    """Measure the exported ``family`` in ``models_dir`` again and record its smoothing:
+    under the entry's version when the sigma is the entry's already, else under a new one
+    (the outputs change)."""
+    engine, entry, models_dir = load_engine(family, Path(models_dir))
+    ratios = measure(family, engine, _bandai_in(family, engine))
+    sigma = smallest_within(ratios)
+    same = sigma == float(entry.extra["output_smoothing"])
     MF.update_entry(
         entry.name,
         entry.version,

@@ -1,0 +1,121 @@
+"""The one step that records evaluations in the manifest: an evaluation writes its report as
+JSON (``training.eval_foreign``: ``runs/eval/foreign-test.json``; ``training.eval_dance
+--json``), and this puts its headline figures into the judged models' entries
+(``metrics.evaluation``), refused for another version of a model than the one judged.
+
+    python -m model_export.evaluations REPORT.json [...] [--models-dir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from model_export import manifest as MF
+from model_export.manifest import put_evaluation
+from training import eval_foreign as EF
+
+
+def record_foreign(report: dict, models_dir: Path) -> None:
+    """The test half's headline figures into each judged model's manifest entry
+    (``metrics.evaluation.foreign_test_half``)."""
+    if report["half"] != "test":
+        raise ValueError(f"the manifest records the test half, not {report['half']!r}")
+    keep = (
+        "n",
+        "top1",
+        "top3",
+        "top1_mean_per_style",
+        "recall",
+        "most_predicted",
+        "most_predicted_share",
+        "spread_ratio",
+        "content_kept",
+        "content_kept_share",
+        "foot_sliding_cm_s",
+        "intervals_90",
+    )
+    real = report["real_bandai"]
+    for family, figures in report["families"].items():
+        put_evaluation(
+            figures["model_name"],
+            figures["model_version"],
+            EF.EVALUATION_KEY.get(family, "foreign_test_half"),
+            {
+                **{k: figures[k] for k in keep},
+                "items": report["items"],
+                "real_leave_action_out_top1": real["leave_action_out"]["top1"],
+                "real_foot_sliding_cm_s": real["foot_sliding_cm_s"],
+                "measured": report.get("measured", ""),
+                "machine": report["machine"],
+                "by": "python -m training.eval_foreign (16 merged styles)",
+            },
+            models_dir,
+        )
+
+
+def record_dance(report: dict, models_dir: Path) -> None:
+    """The report's summary figures into its model's manifest entry (refused for another
+    version of the model; a new export drops them)."""
+    gen = report["generated_set"]["songs"]
+    shared = report["shared_songs"]
+    figures = {
+        "songs": len(report["songs"]),
+        "seeds": report["seeds"],
+        "beat_alignment": report["beat_alignment"],
+        "foot_sliding_cm_s": report["foot_sliding_cm_s"],
+        "foot_contact_score": report["foot_contact_score"],
+        "feature_distances_test_half": report["feature_distances"]["test"],
+        "genre_accuracy": {k: v for k, v in report["genre_accuracy"].items() if k != "confusion"},
+        "ten_minutes": {k: v for k, v in report["ten_minutes"].items() if k != "per_seed"},
+        "generated_set": {
+            "songs": len(gen),
+            "tracker_f_measure": round(float(np.mean([r["f_measure"] for r in gen])), 3),
+            "passing": sum(r["passes"] for r in gen),
+            "stalls": sum(d["stalls"] for r in gen for d in r["dances"]),
+        },
+        "shared_songs": {
+            "songs": len(shared),
+            "bas": round(float(np.mean([r["bas"] for r in shared.values()])), 4),
+            "chance": round(float(np.mean([r["chance"] for r in shared.values()])), 4),
+            "stalls": sum(r["stalls"] for r in shared.values()),
+        },
+        "measured": report.get("measured", ""),
+        "machine": report["machine"],
+        "by": "python -m training.eval_dance (beat alignment: motion.beat_warp.alignment, AIST++ "
+        "score vs shifted grids; foot sliding in cm/s; foot contact: EDGE's physical foot "
+        "contact score; feature distances: AIST++ kinetic and geometric features of 5-s pieces, "
+        "Frechet distance, test half = second half of each held-out song; genre: logistic "
+        "regression on real training-song dances)",
+    }
+    put_evaluation(
+        report["model_name"], report["model_version"], "held_out_songs", figures, models_dir
+    )
+
+
+def record(report: dict, models_dir: Path = MF.MODELS_DIR) -> None:
+    """A report of either evaluation into the manifest (the foreign one by its ``half``)."""
+    if "half" in report:
+        record_foreign(report, models_dir)
+    elif "beat_alignment" in report:
+        record_dance(report, models_dir)
+    else:
+        raise ValueError("not a report of training.eval_foreign or training.eval_dance")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("reports", nargs="+", type=Path)
+    p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
+    args = p.parse_args(argv)
+    for path in args.reports:
+        record(json.loads(path.read_text()), args.models_dir)
+        print(f"recorded {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
