@@ -57,25 +57,14 @@ LICENCE = (
 GRAPH_NAMES = ("style3d", "style2d", "restyler")
 # A named style's code is taken this far from the centre of the named codes, along the line
 # through it (the engine's code_of_name); active and exhausted, one actor's and confused
-# with each other, further. Chosen on the foreign evaluation's development half (docs/
-# translator.md): 1.5 from "normal" (the previous rule) gave top-1 84%, "normal" taking 14%
-# of predictions, content kept 0.867, foot sliding 5.2 cm/s; 1.5 from the centre 85%, 14%,
-# 0.873, 4.9; 1.75 88%, 11%, 0.859, 4.8 (active 40%); with active and exhausted at 2, 90%,
-# 11%, 0.859, 4.8 (active 52%). The largest named code is then 1.94x the largest learned
-# one; stick figures of each style (docs/styles.svg) still look like people.
+# with each other, further. Chosen on the foreign evaluation's development half
+# (docs/experiments/translator_constants.md has the figures).
 NAMED_STYLE_GAIN = 1.75
 NAMED_STYLE_GAINS = {"active": 2.0, "exhausted": 2.0}
 # A style clip's code is taken this far from the centre of the learned codes (the engine's
-# ``played``): the encoder's code of one take lies nearer the centre than its style's, and
-# on foreign content a Bandai take as the style clip conveyed its style in 69% of outputs
-# against 90% for its name (development half). At 1.75: 80%, "normal" 13% of predictions
-# against 21%, active 36% against 4%, content kept 0.863 against 0.898, foot sliding 3.4
-# against 3.6 cm/s (docs/translator.md, "Style clips").
+# ``played``): the encoder's code of one take lies nearer the centre than its style's.
 CLIP_STYLE_GAIN = 1.75
-# A video's code likewise: with a side view of such a take as the video (projected mocap,
-# the joints OpenPose observes), 62% as encoded, "normal" 21%, three styles under 30%
-# (active 0%); at 1.75: 73%, 16%, two (active 8%, childish 24%), content kept 0.871
-# against 0.902, foot sliding 4.4 against 4.8 cm/s.
+# A video's code likewise.
 VIDEO_STYLE_GAIN = 1.75
 
 

@@ -328,14 +328,14 @@ def segments(
 
 def held_out_jitter(family: str, engine, clips: list) -> dict:
     """How much a family's output jerks against real mocap with the same timing: each of
-    Bandai's held-out dataset-2 takes (``training.translator.fit.held_out_take``, never
+    Bandai's held-out dataset-2 takes (``training.bandai_library.held_out_take``, never
     trained on as content), its first 8 s restyled to its own style without the time warp,
     against the take itself. ``ratio`` 1: as smooth as the real performance; jitter from
     any step (the window blend, the foot clean-up) raises it, the output smoothing lowers
     it. Foreign content
     cannot say this: its mocap is noisier than Bandai's, and nothing real has its
     timing in another style."""
-    from training.translator.fit import held_out_take
+    from training.bandai_library import held_out_take
 
     takes = [c for c in clips if held_out_take(c.name)]
     if not takes:

@@ -67,7 +67,7 @@ StyleInput = StyleCode | Motion | Keypoints2D
 NEAREST = 5  # named styles listed by nearest()
 # Codes from a clip or a video are scaled down to this multiple of the largest named style
 # code's norm: the decoder never saw larger codes, and throws the body about on them
-# (docs/experiments/translator_engine.md).
+# (docs/experiments/translator_constants.md).
 CODE_NORM_LIMIT = 1.25
 # A clip is in a named style when its own style code lies within SAME_STYLE_NEAR x the
 # smallest distance between two named codes of that style's code; beyond SAME_STYLE_FAR x it

@@ -85,7 +85,7 @@ def test_codes_within_the_learned_styles_are_not_bounded(shared_client, walk):
 def held_out_dataset2_takes() -> dict[str, bytes]:
     """Bandai dataset-2 takes the shipped translator never trained on (its validation rule:
     not as content, target or style clip), as BVH text by take name."""
-    from training.translator.fit import held_out_take
+    from training.bandai_library import held_out_take
 
     archive = data_path("bandai", "dataset-2", "dataset-2-subset.tar.xz")
     takes = {}

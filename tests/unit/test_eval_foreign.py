@@ -16,6 +16,11 @@ from motion.skeleton import Motion
 from motion.styles import STYLE_ALIASES, canonical_style
 from tests.rigs import FIXTURE
 from training import eval_foreign as EF
+from training import foreign_content as FC
+from training import foreign_judge as FJ
+from training import foreign_measures as FM
+from training import foreign_report as FR
+from training import judges
 
 # the styles Bandai's dataset 2 performs, the only ones with validation takes
 DATASET_2_STYLES = {"active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful"}
@@ -53,16 +58,16 @@ def test_merged_names_are_sixteen_and_each_alias_scores_as_its_twin():
 
 def test_content_kept_is_one_for_the_motion_itself_and_for_a_time_warped_copy():
     motion = swinging()
-    assert EF.content_kept(motion, motion) == pytest.approx(1.0, abs=1e-9)
+    assert FM.content_kept(motion, motion) == pytest.approx(1.0, abs=1e-9)
     for factor in (0.6, 1.5):  # the output of a time warp, brought back onto the content's frames
         warped = Fe.time_warp(motion, factor)
         assert warped.num_frames != motion.num_frames
-        assert EF.content_kept(warped, motion) > 0.99
+        assert FM.content_kept(warped, motion) > 0.99
 
 
 def test_content_kept_is_low_for_an_unrelated_motion():
     sideways = swinging(hz=1.7, phase=1.0, sideways=True)
-    assert abs(EF.content_kept(sideways, swinging())) < 0.3
+    assert abs(FM.content_kept(sideways, swinging())) < 0.3
 
 
 def test_effector_paths_are_in_the_bodys_own_frame():
@@ -73,16 +78,16 @@ def test_effector_paths_are_in_the_bodys_own_frame():
     lrot[:, 1] = rot.mul(turn, lrot[:, 1])
     lpos[:, 1] += [30.0, 0.0, -200.0]
     moved = motion.replace(lrot=lrot, lpos=lpos)
-    np.testing.assert_allclose(EF.effector_paths(moved), EF.effector_paths(motion), atol=1e-6)
+    np.testing.assert_allclose(FM.effector_paths(moved), FM.effector_paths(motion), atol=1e-6)
 
 
 def test_spread_is_zero_for_identical_outputs_and_averages_two_names_of_one_style():
     same = np.tile(np.arange(6.0), (4, 1))
-    assert EF.style_spread(same, ["angry", "sad", "proud", "happy"]) == 0.0
+    assert FM.style_spread(same, ["angry", "sad", "proud", "happy"]) == 0.0
     rows = np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 5.0]])  # elderly's two names average to (1, 0)
     styles = [canonical_style(n) for n in ("old", "elderly", "sad")]
-    assert EF.style_spread(rows, styles) == pytest.approx(5.0)
-    assert EF.mean_pairwise_distance(np.array([[0.0, 0.0], [3.0, 4.0], [0.0, 0.0]])) == (
+    assert FM.style_spread(rows, styles) == pytest.approx(5.0)
+    assert FM.mean_pairwise_distance(np.array([[0.0, 0.0], [3.0, 4.0], [0.0, 0.0]])) == (
         pytest.approx(10.0 / 3.0)
     )
 
@@ -91,8 +96,8 @@ def test_descriptors_tell_motions_apart_and_ignore_where_the_body_stands():
     a, b = swinging(), swinging(hz=2.5, sideways=True)
     lpos = a.lpos.copy()
     lpos[:, 1] += [100.0, 0.0, 50.0]
-    np.testing.assert_allclose(EF.descriptor(a), EF.descriptor(a.replace(lpos=lpos)), atol=1e-6)
-    assert np.linalg.norm(EF.descriptor(a) - EF.descriptor(b)) > 0.1
+    np.testing.assert_allclose(FM.descriptor(a), FM.descriptor(a.replace(lpos=lpos)), atol=1e-6)
+    assert np.linalg.norm(FM.descriptor(a) - FM.descriptor(b)) > 0.1
 
 
 def test_recognition_counts_top1_top3_recall_and_the_most_predicted_style():
@@ -106,7 +111,7 @@ def test_recognition_counts_top1_top3_recall_and_the_most_predicted_style():
             [0.1, 0.1, 0.7, 0.1],  # asked c, said c
         ])
     )  # fmt: skip
-    got = EF.recognition(["a", "b", "c", "d", "c"], logp, classes)
+    got = FJ.recognition(["a", "b", "c", "d", "c"], logp, classes)
     assert got["top1"] == pytest.approx(3 / 5) and got["top3"] == pytest.approx(4 / 5)
     assert got["recall"] == {"a": 1.0, "b": 0.0, "c": 1.0, "d": 0.0}
     assert got["top1_mean_per_style"] == pytest.approx(0.5)
@@ -125,7 +130,7 @@ def test_within_actor_recall_only_chooses_among_one_actors_styles():
         row("exhausted", [0.5, 0.1, 0.2, 0.05, 0.05, 0.05, 0.05]),  # active, an actor-mate
         row("elderly", [0.01, 0.01, 0.9, 0.05, 0.01, 0.01, 0.01], dataset="dataset-1"),
     ]  # fmt: skip
-    group = EF.within_actor(held, classes)["active, elderly, exhausted"]
+    group = FJ.within_actor(held, classes)["active, elderly, exhausted"]
     assert group["n"] == 2 and group["recall_within_group"] == 0.5
     assert group["top1"] == 0.0 and group["chance"] == pytest.approx(1 / 3, abs=1e-4)
 
@@ -146,7 +151,7 @@ def test_every_bandai_action_falls_in_one_of_five_groups():
         "other": ("bow", "guide", "respond", "call", "punch", "kick", "slash", "dance-short"),
     }
     for group, contents in index.items():
-        assert {EF.action_group(c) for c in contents} == {group}
+        assert {FJ.action_group(c) for c in contents} == {group}
 
 
 def _takes():
@@ -160,9 +165,9 @@ def _takes():
 
 def test_split_is_deterministic_by_take_and_balanced_across_folders():
     takes = _takes()
-    half_of = EF.split_halves(takes)
+    half_of = FC.split_halves(takes)
     shuffled = {f: list(reversed(v)) for f, v in reversed(list(takes.items()))}
-    assert EF.split_halves(shuffled) == half_of  # no dependence on listing order
+    assert FC.split_halves(shuffled) == half_of  # no dependence on listing order
     every = [t for v in takes.values() for t in v]
     assert sorted(half_of) == sorted(every) and set(half_of.values()) == {"dev", "test"}
     for names in takes.values():
@@ -170,14 +175,14 @@ def test_split_is_deterministic_by_take_and_balanced_across_folders():
         assert abs(halves.count("dev") - halves.count("test")) <= 1
     assert abs(list(half_of.values()).count("dev") - len(every) / 2) <= 0.5
     takes["xia"].append("xia/clip_new")  # another take changes only its own folder and later
-    assert {t: h for t, h in EF.split_halves(takes).items() if t.startswith("cmu-31")} == {
+    assert {t: h for t, h in FC.split_halves(takes).items() if t.startswith("cmu-31")} == {
         t: h for t, h in half_of.items() if t.startswith("cmu-31")
     }
 
 
 def test_segments_are_at_most_eight_seconds_and_at_most_four():
     for frames, count, longest in ((30, 1, 30), (274, 2, 137), (900, 4, 225), (2575, 4, 240)):
-        parts = EF.segments(swinging(frames=frames))
+        parts = judges.segments(swinging(frames=frames))
         assert len(parts) == count and max(p.num_frames for p in parts) == longest
         assert parts[0].lrot[0].tolist() == swinging(frames=frames).lrot[0].tolist()
 
@@ -185,10 +190,10 @@ def test_segments_are_at_most_eight_seconds_and_at_most_four():
 def test_rig_variants_read_through_the_service_match_the_original():
     original = bvh.load(FIXTURE)
     canon = K.global_positions(retarget.to_canonical(original))
-    for name, variant in EF.rig_variants(original).items():
+    for name, variant in FC.rig_variants(original).items():
         names = variant.skeleton.names
         assert any(n.startswith("mixamorig:") for n in names) == (name == "mixamo")
-        back = K.global_positions(EF.through_service(variant))
+        back = K.global_positions(FC.through_service(variant))
         assert back.shape == canon.shape
         np.testing.assert_allclose(back, canon, atol=0.01, err_msg=name)
 
@@ -197,11 +202,11 @@ def test_the_split_covers_every_source_folder():
     from tests.conftest import data_path
 
     root = data_path("cmu-31").parent
-    takes = EF.foreign_takes(root)
-    assert set(takes) == set(EF.FOLDERS) and all(takes.values())
+    takes = FC.foreign_takes(root)
+    assert set(takes) == set(FC.FOLDERS) and all(takes.values())
     every = [t.split("/")[1] for v in takes.values() for t in v]
     assert len(every) == len(set(every)) == 24  # CMU 05_20, in two folders, once
-    half_of = EF.split_halves(takes)
+    half_of = FC.split_halves(takes)
     for folder, names in takes.items():  # cmu-dance-3dsmax has one take, in one half
         halves = {half_of[t] for t in names}
         assert halves == {"dev", "test"} or (len(names) == 1 and len(halves) == 1), folder
@@ -227,13 +232,13 @@ def test_a_cached_judge_is_kept_for_the_same_code_and_motion_and_only_for_them()
         clip_from_motion(swinging(hz=hz), name=n, dataset="d", take=n, style=s, content="walk")
         for n, hz, s in (("a", 1.0, "old"), ("b", 1.5, "happy"))
     ]
-    key = EF.judge_key(clips)
-    assert EF.judge_key(list(reversed(clips))) == key
+    key = FJ.judge_key(clips)
+    assert FJ.judge_key(list(reversed(clips))) == key
     moved = clips[0].root.copy()
     moved[5, 1] += 0.01  # a retargeting change the clip cache would not notice
-    assert EF.judge_key([replace(clips[0], root=moved), clips[1]]) != key
-    assert EF.judge_key([replace(clips[0], style="sad"), clips[1]]) != key
-    read = {p.name for p in EF.motion_sources("features", "canonical", "styles")}
+    assert FJ.judge_key([replace(clips[0], root=moved), clips[1]]) != key
+    assert FJ.judge_key([replace(clips[0], style="sad"), clips[1]]) != key
+    read = {p.name for p in FJ.motion_sources("features", "canonical", "styles")}
     assert {"features.py", "kinematics.py", "rotations.py", "styles.py"} <= read
     assert not {"audio_features.py", "retarget.py", "gltf.py"} & read  # their edits keep the judge
 
@@ -275,7 +280,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     assert reference["n"] == 454
     clips = [g["n"] for g in reference["within_actor_groups"].values()]
     assert clips == [120, 80, 80]  # dataset-2's takes only: 40 per style
-    assert "test half" in EF.markdown(report)
+    assert "test half" in FR.markdown(report)
     models = tmp_path / "models"
     shutil.copytree(Settings().models_dir, models)
     EV.record_foreign(report, models)
@@ -289,8 +294,8 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
 
 def test_unseen_style_clips_come_only_from_takes_the_encoders_never_trained_on():
     from tests.conftest import data_path
+    from training.bandai_library import held_out_take
     from training.data import load_bandai
-    from training.translator.fit import held_out_take
 
     data_path("bandai")
     clips = load_bandai()
@@ -317,10 +322,10 @@ def test_a_pinned_judge_reads_back_the_same_and_refuses_changed_features(tmp_pat
         [frame_features(c.motion) for c in clips], ["old", "happy"], seeds=(0,), steps=3
     )
     held_out = [{"take": "a", "style": "old", "group": "walks", "logp": np.log([0.3, 0.7])}]
-    judge = EF.StyleJudge(classifier, held_out)
+    judge = FJ.StyleJudge(classifier, held_out)
     path = tmp_path / "judge.pt"
-    EF.pin_judge(judge, clips, path)
-    back = EF.pinned_judge(path, clips)
+    FJ.pin_judge(judge, clips, path)
+    back = FJ.pinned_judge(path, clips)
     assert back.classes == judge.classes and back.held_out[0]["take"] == "a"
     np.testing.assert_array_equal(back.held_out[0]["logp"], held_out[0]["logp"])
     for c in clips:
@@ -329,8 +334,8 @@ def test_a_pinned_judge_reads_back_the_same_and_refuses_changed_features(tmp_pat
         )
     faster = clip_from_motion(swinging(hz=2.5), name="b", dataset="d", take="b", style="happy")
     with pytest.raises(ValueError, match="judges take b differently"):
-        EF.pinned_judge(path, [clips[0], replace(faster, content="walk")])
-    assert EF.judge_for(clips, None, path).classes == judge.classes  # the file, not training
+        FJ.pinned_judge(path, [clips[0], replace(faster, content="walk")])
+    assert FJ.judge_for(clips, None, path).classes == judge.classes  # the file, not training
 
 
 def test_intervals_resample_takes_not_outputs():

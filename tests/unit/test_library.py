@@ -304,7 +304,7 @@ def test_the_bandai_library_holds_what_training_read_by_file_names(data_dir, tmp
     from motion.styles import canonical_style
     from training import bandai_library
     from training import data as D
-    from training.translator.fit import held_out_take
+    from training.bandai_library import held_out_take
 
     root = bandai_library.write(tmp_path / "bandai", root=data_dir)
     library, problems = L.read_labels(root)

@@ -35,7 +35,6 @@ import argparse
 import math
 import os
 import time
-import zlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -151,15 +150,6 @@ def bandai_library_clips() -> list[D.Clip]:
     from training import bandai_library
 
     return read_library(bandai_library.write(bandai_library.default_folder()))
-
-
-def held_out_take(name: str) -> bool:
-    """Bandai's held-out takes (the Bandai library's ``held_out`` labels): one dataset-2
-    take in ten (and its mirror image), by a hash of its name: content of the validation
-    examples, never trained on. Dataset 2 performs each action in each style four times,
-    so its pairs stay complete without them."""
-    base = name.removesuffix("~mirrored")
-    return base.startswith("dataset-2") and zlib.crc32(base.encode()) % 10 == 0
 
 
 class Trainer:
