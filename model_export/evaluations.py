@@ -82,6 +82,7 @@ def record_dance(report: dict, models_dir: Path) -> None:
             "bas": round(float(np.mean([r["bas"] for r in shared.values()])), 4),
             "chance": round(float(np.mean([r["chance"] for r in shared.values()])), 4),
             "stalls": sum(r["stalls"] for r in shared.values()),
+            "passing_reference_beats": sum(r["passes"] for r in shared.values()),
         },
         "measured": report.get("measured", ""),
         "machine": report["machine"],

@@ -20,7 +20,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from motion.audio_decode import SILENCE_DBFS
-from motion.beat_tracking import beat_phase, downbeats, pulses, track_beats
+from motion.beat_tracking import (
+    GENRE_TEMPO,
+    Tempo,
+    at_level,
+    beat_phase,
+    downbeats,
+    pulses,
+    tempo_curve,
+    track_beats,
+)
 from motion.spectral import (
     FEATURE_SR,
     N_MELS,
@@ -62,7 +71,8 @@ class AudioFeatures:
     a bar of ``beats_per_bar`` (:func:`motion.beat_tracking.downbeats`; empty and 0 when the
     song has under two bars); ``pulses`` ``(P,)`` the beats and, where the song accents them
     as much, the half-beats (:func:`motion.beat_tracking.pulses`: what a dance should land
-    on).
+    on); ``beat_onset`` the envelope they were tracked on, at ``ONSET_FRAME_RATE``, and
+    ``tempo_curve`` its tempo (:meth:`for_genre` tracks it again at a genre's level).
     Values are in the units stated, not normalised: networks normalise them with
     statistics saved at training time.
     """
@@ -77,6 +87,8 @@ class AudioFeatures:
     downbeats: np.ndarray
     beats_per_bar: int
     pulses: np.ndarray
+    beat_onset: np.ndarray
+    tempo_curve: Tempo
 
     @property
     def num_frames(self) -> int:
@@ -86,6 +98,18 @@ class AudioFeatures:
     def playing(self) -> np.ndarray:
         """``(F,)`` bool: the music sounds at the frame (RMS above :data:`SILENCE_DBFS`)."""
         return self.spectral[:, SPECTRAL_COLUMNS.index("rms_db")] > SILENCE_DBFS
+
+    def for_genre(self, genre: str | None) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(tempo, beats, pulses)`` at the metrical level a dancer of ``genre`` steps
+        (:func:`motion.beat_tracking.genre_prior`; the features' own for None)."""
+        if genre is None:
+            return self.tempo, self.beats, self.pulses
+        tempo, beats = self.tempo, self.beats
+        if genre in GENRE_TEMPO:
+            level = at_level(self.tempo_curve, GENRE_TEMPO[genre], ONSET_FRAME_RATE)
+            if level is not self.tempo_curve:
+                tempo, beats = track_beats(self.beat_onset, ONSET_FRAME_RATE, tempo=level)
+        return tempo, beats, pulses(beats, self.beat_onset, genre=genre)
 
     def matrix(self) -> np.ndarray:
         """``(F, FEATURE_DIM)`` float32 laid out as MATRIX_COLUMNS."""
@@ -118,7 +142,8 @@ def frame_features(
     envelope = onset_from_log_mel(power_db(onset_mel), np.mean)
     levels = beat_levels(onset_mel)
     beat_onset = beat_envelope(onset_mel, levels)
-    tempo, beats = track_beats(beat_onset, ONSET_FRAME_RATE)
+    estimate = tempo_curve(beat_onset, ONSET_FRAME_RATE)
+    tempo, beats = track_beats(beat_onset, ONSET_FRAME_RATE, tempo=estimate)
     bar_starts, bar = downbeats(beats, onset_mel, levels=levels)
     onset = _onset_at_frames(envelope, num_frames, fps)
     phase = beat_phase(beats, num_frames, fps, period=60.0 / tempo if tempo > 0 else None)
@@ -133,6 +158,8 @@ def frame_features(
         downbeats=bar_starts,
         beats_per_bar=bar,
         pulses=pulses(beats, beat_onset),
+        beat_onset=beat_onset,
+        tempo_curve=estimate,
     )
 
 

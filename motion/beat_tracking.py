@@ -23,6 +23,13 @@ LOCAL_TEMPO_SECONDS = 12.0
 """Span of the autocorrelation that sets the local tempo the beat tracker follows."""
 LOCAL_TEMPO_RANGE = 1.35
 """The local tempo stays within this factor of the song's tempo (its octave)."""
+GENRE_TEMPO = {"cha-cha": 122.6, "rumba": 97.8, "tango": 127.8, "waltz": 86.1}
+"""The tempo (bpm of the beat a dancer steps) each ballroom genre is danced at: the geometric
+mean of the danced, else tracked, tempi of the shared songs used to train the dance model
+(``python -m training.dance_tempo --fit``). A waltz is counted in threes at 84-90."""
+GENRE_TEMPO_OCTAVES = 0.25
+"""Width of the genre's tempo prior (log-normal, in octaves): a level an octave off the
+genre's tempo pays 8 nats of periodicity."""
 _ACF_CHUNK_FRAMES = 1024  # autocorrelation frames per batch: bounds the FFT matrix
 _ACF_STRIDE = 2  # autocorrelations of every other frame's excerpt: 8-s windows overlap anyway
 
@@ -30,10 +37,14 @@ _ACF_STRIDE = 2  # autocorrelations of every other frame's excerpt: 8-s windows 
 @dataclass(frozen=True)
 class Tempo:
     """The tempo of an onset envelope: ``bpm`` for the whole song and ``period (T,)``, the
-    local beat period in envelope frames at every frame."""
+    local beat period in envelope frames at every frame; ``autocorrelation`` the sums of the
+    envelope's autocorrelation over blocks of ``block`` frames it was found in (so that
+    :func:`at_level` chooses another metrical level without computing them again)."""
 
     bpm: float
     period: np.ndarray
+    autocorrelation: np.ndarray | None = None
+    block: int = 0
 
 
 def estimate_tempo(
@@ -61,6 +72,7 @@ def tempo_curve(
     std_octaves: float = 1.0,
     max_bpm: float = MAX_BPM,
     window_seconds: float = 8.0,
+    level_bpm: float | None = None,
 ) -> Tempo:
     """Global and local tempo of an onset envelope ``(T,)`` sampled at ``frame_rate`` Hz.
 
@@ -76,6 +88,13 @@ def tempo_curve(
     :data:`LOCAL_TEMPO_RANGE` of the global one, median-filtered over 5 s, so a tempo change
     is followed without leaving the octave. ``bpm`` is 0.0 (and ``period`` empty) when the
     envelope has no onsets.
+
+    With ``level_bpm`` (the tempo a dance genre steps, :data:`GENRE_TEMPO`) the metrical
+    level is chosen as a listener who knows the dance would: among the global tempo's
+    levels (1/3, 1/2, 1, 2 and 3 times it, under ``max_bpm``), the one whose periodicity
+    and a log-normal prior of :data:`GENRE_TEMPO_OCTAVES` around ``level_bpm`` score best.
+    Only the tracked pulse's own levels compete: a prior alone over every lag moved
+    synthetic 3/4 songs onto two-thirds of their beat.
     """
     onset = np.asarray(onset, dtype=np.float64)
     if onset.size == 0 or not onset.any():
@@ -90,7 +109,57 @@ def tempo_curve(
     log_prior = np.concatenate([[-np.inf], np.where(bpms[1:] < max_bpm, log_prior, -np.inf)])
     lag = _refined_peak(np.log1p(1e6 * mean_ac) + log_prior, int(np.argmax(log_prior)))
     period = _local_periods(sums, lag, block, len(onset), frame_rate)
-    return Tempo(float(60.0 * frame_rate / lag), period)
+    found = Tempo(float(60.0 * frame_rate / lag), period, sums, block)
+    if level_bpm is None:
+        return found
+    return at_level(found, level_bpm, frame_rate, max_bpm=max_bpm)
+
+
+def at_level(
+    tempo: Tempo, level_bpm: float, frame_rate: float = ONSET_FRAME_RATE, *, max_bpm=MAX_BPM
+) -> Tempo:
+    """``tempo`` at the metrical level a listener expecting ``level_bpm`` taps (see
+    :func:`tempo_curve`); ``tempo`` itself when that is its own level."""
+    if tempo.bpm <= 0 or tempo.autocorrelation is None:
+        return tempo
+    frames = len(tempo.period)
+    periodicity = np.log1p(1e6 * tempo.autocorrelation.sum(axis=0) / frames)
+    lag = 60.0 * frame_rate / tempo.bpm
+    level = _metrical_level(periodicity, lag, level_bpm, frame_rate, max_bpm)
+    if level is None:
+        return tempo
+    period = _local_periods(tempo.autocorrelation, level, tempo.block, frames, frame_rate)
+    return Tempo(float(60.0 * frame_rate / level), period, tempo.autocorrelation, tempo.block)
+
+
+METRICAL_LEVELS = (1.0 / 3.0, 0.5, 1.0, 2.0, 3.0)
+
+
+def _metrical_level(
+    periodicity: np.ndarray, lag: float, level_bpm: float, frame_rate: float, max_bpm: float
+) -> float | None:
+    """The lag, among :data:`METRICAL_LEVELS` of ``lag``'s tempo, that a listener expecting
+    ``level_bpm`` taps (see :func:`tempo_curve`), refined to its own peak; None for
+    ``lag`` itself."""
+    best, best_score = None, -np.inf
+    for level in METRICAL_LEVELS:
+        candidate = lag / level
+        bpm = 60.0 * frame_rate / candidate
+        centre = int(round(candidate))
+        if bpm >= max_bpm or not 3 <= centre < len(periodicity) - 3:
+            continue
+        prior = -0.5 * (np.log2(bpm / level_bpm) / GENRE_TEMPO_OCTAVES) ** 2
+        near = periodicity[centre - 1 : centre + 2]
+        score = float(near.max()) + prior
+        if score > best_score:
+            peak = centre - 1 + int(np.argmax(near))
+            best = (
+                None
+                if level == 1.0
+                else peak - 2 + _refined_peak(periodicity[peak - 2 : peak + 3], 2)
+            )
+            best_score = score
+    return best
 
 
 def _refined_peak(score: np.ndarray, fallback: int) -> float:
@@ -156,6 +225,8 @@ def track_beats(
     *,
     bpm: float | None = None,
     tightness: float = 100.0,
+    genre: str | None = None,
+    tempo: Tempo | None = None,
 ) -> tuple[float, np.ndarray]:
     """Tempo (bpm) and beat times ``(B,)`` in seconds from an onset envelope ``(T,)``.
 
@@ -164,7 +235,10 @@ def track_beats(
     score of a previous beat ``d`` frames back, penalised by ``tightness * log(d / p)^2``;
     the path is traced back from the last strong beat and weak beats at either end are
     dropped. ``p`` is the local period of :func:`tempo_curve` (so a tempo change is
-    followed), or constant when ``bpm`` is given (then this is librosa's tracker). Returns
+    followed), or constant when ``bpm`` is given (then this is librosa's tracker). With a
+    ``genre`` (a key of :data:`GENRE_TEMPO`) the metrical level is the one a dancer of that
+    genre steps (:func:`tempo_curve`'s ``level_bpm``). ``tempo``: the envelope's
+    :func:`tempo_curve`, when already known. Returns
     ``(0.0, [])`` when there are no onsets. Frame ``t`` of the envelope is time
     ``t / frame_rate``.
     """
@@ -174,19 +248,21 @@ def track_beats(
     if onset.size < 2 or not onset.any():
         return 0.0, np.zeros(0)
     if bpm is None:
-        estimate = tempo_curve(onset, frame_rate)
-        tempo, periods = estimate.bpm, estimate.period
+        estimate = tempo or tempo_curve(onset, frame_rate)
+        if genre in GENRE_TEMPO:
+            estimate = at_level(estimate, GENRE_TEMPO[genre], frame_rate)
+        bpm_found, periods = estimate.bpm, estimate.period
     else:
-        tempo = float(bpm)
-        if not tempo > 0:
+        bpm_found = float(bpm)
+        if not bpm_found > 0:
             raise ValueError(f"bpm must be positive, got {bpm}")
-        periods = np.full(len(onset), frame_rate * 60.0 / tempo)
-    period = frame_rate * 60.0 / tempo
+        periods = np.full(len(onset), frame_rate * 60.0 / bpm_found)
+    period = frame_rate * 60.0 / bpm_found
     local = _local_score(onset / (onset.std(ddof=1) + 1e-30), period)
     backlink, cumulative = _beat_dp(local, periods, tightness)
     beats = _backtrack(backlink, _last_beat(cumulative))
     beats = _trim_weak_ends(local, beats)
-    return tempo, beats / frame_rate
+    return bpm_found, beats / frame_rate
 
 
 def _local_score(onset: np.ndarray, period: float) -> np.ndarray:
@@ -315,15 +391,22 @@ HALF_BEAT_SHARE = 0.45
 beats' (the beat envelope's peak within 50 ms, averaged over the song)."""
 
 
-def pulses(beats: np.ndarray, envelope: np.ndarray, frame_rate: float = ONSET_FRAME_RATE):
+def pulses(
+    beats: np.ndarray,
+    envelope: np.ndarray,
+    frame_rate: float = ONSET_FRAME_RATE,
+    *,
+    genre: str | None = None,
+):
     """The music's strong pulses ``(P,)`` (seconds): ``beats (B,)``, and the points halfway
     between them when the song accents those nearly as much (:data:`HALF_BEAT_SHARE`) and
     the doubled tempo stays under :data:`MAX_BPM`. A song at 180 bpm whose kick and snare
     alternate on every beat is tracked at 90 (the prior's octave, which 90-bpm rumbas with
-    strong eighths need too): its dance should still land on every hit."""
+    strong eighths need too): its dance should still land on every hit. A waltz steps the
+    three beats of its bars, not their halves: for ``genre="waltz"`` the beats alone."""
     beats = np.asarray(beats, dtype=np.float64)
     envelope = np.asarray(envelope, dtype=np.float64)
-    if beats.size < 2 or envelope.size == 0:
+    if beats.size < 2 or envelope.size == 0 or genre == "waltz":
         return beats
     if 2 * 60.0 / float(np.median(np.diff(beats))) > MAX_BPM:
         return beats

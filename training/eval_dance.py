@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import audio_decode, audio_features, beat_tracking
+from motion import audio_decode, audio_features, beat_tracking, spectral
 from motion import beat_warp as BW
 from motion import contacts as CT
 from motion import dance_features as DF
@@ -135,6 +135,8 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
         }
         for seed in range(seeds):
             genre = DF.MUSIC_GENRES[(i + seed) % len(DF.MUSIC_GENRES)]
+            if song.pattern == "waltz":  # a 3/4 song is danced as a waltz
+                genre = "waltz"
             job = DanceJob(song.samples, song.sr, genre=genre, seed=seed)
             out = engine.predict(job, StageTimer(engine.name)).motion
             score, chance = BW.alignment(out, song.beats)
@@ -149,10 +151,23 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
     return {"songs": rows, "seeds": seeds}
 
 
+def reference_beats(samples: np.ndarray, sr: int, bpm: float) -> np.ndarray:
+    """Beat times (s) at a known tempo: librosa's tracker (median onset envelope, the
+    tempo fixed) at ``bpm``."""
+    envelope = spectral.onset_strength(samples, sr, aggregate=np.median)
+    return beat_tracking.track_beats(envelope, bpm=bpm)[1]
+
+
 def shared_songs(engine, log=print, names=None) -> dict:
-    """Every Dance with Melody song, whole, danced in its own genre (seed 0): alignment to
-    the tracker's beats beside shifted grids, stalls."""
+    """Every Dance with Melody song, whole, danced in its own genre (seed 0): its tempo
+    beside the song's danced (else librosa's) tempo (``training.dance_tempo``), alignment to
+    the tracker's beats and to the beats at that reference tempo, beside shifted grids;
+    stalls."""
+    from training import dance_alignment as DA
+    from training.dance_tempo import reference_tempo
     from training.data import DWM_GENRES, data_dir
+
+    table = DA.load_table()["dances"]
 
     rows = {}
     root = data_dir() / "dance-with-melody"
@@ -164,12 +179,19 @@ def shared_songs(engine, log=print, names=None) -> dict:
         result = engine.predict(DanceJob(samples, sr, genre=genre), StageTimer(engine.name))
         frames = result.motion.num_frames
         playing = audio_features.frame_features(samples, sr, DF.FPS, frames).playing
+        reference, how = reference_tempo(table[folder.name])
+        known, known_chance = BW.alignment(result.motion, reference_beats(samples, sr, reference))
         rows[folder.name] = {
             "genre": genre,
             "seconds": round(len(samples) / sr, 1),
             "tempo": round(result.tempo, 1),
+            "reference_tempo": round(reference, 1),
+            "reference": how,
             "bas": round(result.bas, 4),
             "chance": round(result.bas_chance, 4),
+            "bas_reference": round(known, 4),
+            "chance_reference": round(known_chance, 4),
+            "passes": bool(known >= PASS_SCORE and known >= PASS_RATIO * known_chance),
             **stall_figures(result.motion, playing),
         }
         log(f"{folder.name}: {json.dumps(rows[folder.name])}")
@@ -222,13 +244,18 @@ def genre_features(motion: Motion) -> np.ndarray:
 
 
 def held_out(engine, seeds: int, log=print) -> dict:
-    """Real and generated dances on the held-out songs: alignment (to the tracker's beats),
-    genre recognition of every requested genre, foot sliding."""
+    """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
+    and the generated dances' to the beats at the song's danced tempo too), genre
+    recognition of every requested genre, foot sliding and contacts, feature distances."""
     from training.judges import ClipClassifier
 
     held, train = held_out_songs()
     genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])
-    rows = {k: [] for k in ("real", "generated", "generated_no_warp")}
+    from training import dance_alignment as DA
+    from training.dance_tempo import reference_tempo
+
+    table = DA.load_table()["dances"]
+    rows = {k: [] for k in ("real", "generated", "generated_no_warp", "generated_reference")}
     sliding = {"real": [], "generated": []}
     contact = {"real": [], "generated": []}
     generated_dances: dict[str, list[Motion]] = {}
@@ -236,6 +263,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
     real_hits, songs = [], {}
     for name, genre, real, samples, sr in held:
         beats = audio_features.frame_features(samples, sr, DF.FPS).beats
+        known = reference_beats(samples, sr, reference_tempo(table[name])[0])
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         sliding["real"].append(CT.canonical_foot_sliding(real))
@@ -257,6 +285,11 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 s, c = BW.alignment(out, beats)
                 rows["generated"].append((s, c))
                 song.setdefault("generated", []).append({"bas": round(s, 4), "chance": round(c, 4)})
+                s, c = BW.alignment(out, known)
+                rows["generated_reference"].append((s, c))
+                song.setdefault("generated_reference", []).append(
+                    {"bas": round(s, 4), "chance": round(c, 4)}
+                )
             job = DanceJob(samples, sr, genre=genre, seed=seed, beat_warp=False)
             raw = engine.predict(job, StageTimer(engine.name)).motion
             rows["generated_no_warp"].append(BW.alignment(raw, beats))
@@ -491,7 +524,21 @@ def markdown(report: dict) -> str:
             f"{np.mean([r['chance'] for r in shared.values()]):.3f} (lowest ratio "
             f"{min(r['bas'] / max(r['chance'], 1e-9) for r in shared.values()):.2f}); "
             f"stalls {sum(r['stalls'] for r in shared.values())}; slowest 5 s "
-            f"{min(r['slowest_5s_share'] for r in shared.values()):.0%} of the median.",
+            f"{min(r['slowest_5s_share'] for r in shared.values()):.0%} of the median. Against "
+            "the beats at the song's danced (else librosa's) tempo: "
+            f"{sum(r['passes'] for r in shared.values())}/{len(shared)} at alignment >= "
+            f"{PASS_SCORE} and >= {PASS_RATIO}x chance.",
+            "",
+            "| song | genre | tempo: tracked / reference | alignment / chance: tracked beats "
+            "| reference beats | passes | slowest 5 s |",
+            "|---|---|---|---|---|---|---|",
+            *(
+                f"| {name} | {r['genre']} | {r['tempo']:g} / {r['reference_tempo']:g} "
+                f"({r['reference']}) | {r['bas']:.2f} / {r['chance']:.2f} | "
+                f"{r['bas_reference']:.2f} / {r['chance_reference']:.2f} | "
+                f"{'yes' if r['passes'] else 'no'} | {r['slowest_5s_share']:.0%} |"
+                for name, r in shared.items()
+            ),
         ]
     ba, pfc = report["beat_alignment"], report["foot_contact_score"]
     lines += [
@@ -509,6 +556,9 @@ def markdown(report: dict) -> str:
         f"{pfc['generated']:.3f} |",
         f"| generated, no beat warp | {ba['generated_no_warp']['bas']:.3f} | "
         f"{ba['generated_no_warp']['chance']:.3f} | - | - |",
+        f"| generated, against the beats at the danced tempo | "
+        f"{ba['generated_reference']['bas']:.3f} | {ba['generated_reference']['chance']:.3f} "
+        "| - | - |",
         "",
         "Foot contact score: EDGE's physical foot contact score (x 10^4, 5-s pieces; lower: "
         "the hips accelerate only while a foot is planted).",

@@ -75,6 +75,7 @@ PATTERNS = (
     "tempo_change",
     "quiet_intro",
     "break",
+    "waltz",
 )
 """The beat test set's drum patterns (see :func:`beat_song`)."""
 TEMPI = (70.0, 95.0, 124.0, 150.0, 180.0)
@@ -134,7 +135,8 @@ CHORDS = ((220.0, 277.2, 329.6), (196.0, 246.9, 293.7), (174.6, 220.0, 261.6),
 
 
 def beat_song(pattern: str, bpm: float, seconds: float = 60.0, sr: int = SR, seed: int = 0):
-    """One song of the beat test set (a :class:`BeatSong`), 4/4, one chord per bar:
+    """One song of the beat test set (a :class:`BeatSong`), 4/4 but for ``waltz``, one chord
+    per bar:
 
     - ``four_on_the_floor``: a kick on every beat, a loud open hi-hat halfway between;
     - ``backbeat``: kick on 1 and 3, snare on 2 and 4, hi-hat on the eighths, bass on 1 and 3;
@@ -148,7 +150,9 @@ def beat_song(pattern: str, bpm: float, seconds: float = 60.0, sr: int = SR, see
     - ``quiet_intro``: :data:`INTRO_SECONDS` of quiet chords, then four on the floor (beats
       from the first kick);
     - ``break``: the backbeat with no drums between :data:`BREAK_SECONDS` (chords and bass
-      go on; so do the known beats).
+      go on; so do the known beats);
+    - ``waltz``: 3/4, kick and bass on 1, a chord stab and a snare on 2 and 3, the hi-hat on
+      every eighth (as loud as a waltz's pianos and strings make its half-beats).
     """
     if pattern not in PATTERNS:
         raise ValueError(f"unknown pattern {pattern!r}; patterns are {PATTERNS}")
@@ -180,6 +184,18 @@ def beat_song(pattern: str, bpm: float, seconds: float = 60.0, sr: int = SR, see
         bar = 4 * 60.0 / bpm
         for i, t in enumerate(np.arange(0.0, start, bar)):
             hit(t, bar, _chord(CHORDS[i % 4], 0.02))
+    if pattern == "waltz":
+        for b, (t, p) in enumerate(zip(beats, period, strict=True)):
+            chord = CHORDS[(b // 3) % 4]
+            if b % 3 == 0:
+                hit(t, 0.3, _kick)
+                hit(t, 3 * p, _bass(chord[0] / 2))
+            else:
+                hit(t, 0.6 * p, _chord(chord, 0.12))
+                hit(t, 0.15, _snare(rng))
+            for s in (0.0, 0.5):
+                hit(t + s * p, 0.05, _hat(rng, 0.3))
+        return _finish(pattern, bpm, y, rng, sr, beats, beats[::3])
     for b, (t, p) in enumerate(zip(beats, period, strict=True)):
         in_bar = b % 4
         if in_bar == 0:
@@ -214,10 +230,13 @@ def beat_song(pattern: str, bpm: float, seconds: float = 60.0, sr: int = SR, see
             subdivisions = (0.0, 0.5)
         for s in subdivisions:
             hit(t + s * p, 0.05, _hat(rng, 0.3))
-    y += 0.003 * rng.standard_normal(n)  # a noise floor: no digital silence anywhere
+    return _finish(pattern, bpm, y, rng, sr, beats, beats[::4])
+
+
+def _finish(pattern, bpm, y, rng, sr, beats, downbeats) -> BeatSong:
+    y = y + 0.003 * rng.standard_normal(len(y))  # a noise floor: no digital silence anywhere
     samples = (0.8 * y / max(np.abs(y).max(), 1e-9)).astype(np.float32)
-    name = f"{pattern}_{bpm:g}"
-    return BeatSong(name, pattern, float(bpm), samples, sr, beats, beats[::4])
+    return BeatSong(f"{pattern}_{bpm:g}", pattern, float(bpm), samples, sr, beats, downbeats)
 
 
 def beat_test_set(seconds: float = 60.0, tempi=TEMPI, patterns=PATTERNS) -> list[BeatSong]:

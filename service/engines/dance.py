@@ -56,13 +56,12 @@ class DanceJob:
 
 @dataclass
 class Music:
-    """The music's standardised features ``x (F, A)``, its beats and tempo, and the seeded
-    start pose and noise seed of the rollout."""
+    """The music's standardised features ``x (F, A)``, its features (beats and tempo at the
+    general prior the networks read; the genre's level is tracked once the genre is known),
+    and the seeded start pose and noise seed of the rollout."""
 
     x: np.ndarray
-    tempo: float
-    beats: np.ndarray
-    pulses: np.ndarray  # the beats, and the half beats where the song hits them as hard
+    features: audio_features.AudioFeatures
     playing: np.ndarray  # (F,) bool: frames where the music plays
     start: np.ndarray
     noise_seed: int
@@ -182,8 +181,7 @@ class DanceEngine(Engine):
         rng = np.random.default_rng(job.seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])
         noise_seed = int(rng.integers(2**31))
-        return Music(x, float(feats.tempo), feats.beats, feats.pulses, feats.playing, start,
-                     noise_seed)  # fmt: skip
+        return Music(x, feats, feats.playing, start, noise_seed)
 
     def predict(self, job: DanceJob, timer: StageTimer) -> DanceResult:
         """The family's core: the music's features, the audio graph (codes, genre
@@ -230,21 +228,22 @@ class DanceEngine(Engine):
         if job.genre is None:
             p = out.genre_probs[out.genre]
             warnings.append(f"genre not given: predicted {out.genre} (p = {p:.2f})")
-        if music.tempo <= 0:
+        with timer.stage("beats"):  # the level a dancer of the genre steps
+            tempo, beats, pulses = music.features.for_genre(out.genre)
+        if tempo <= 0:
             warnings.append("no beat found in the music: the dance is not beat-aligned")
         with timer.stage("motion"):
             raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
             _, motion = DF.keep_moving(raw, music.playing)
-        beats = music.beats
         if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
             with timer.stage("foot_cleanup"):
                 motion = DF.clean_feet(motion)
         if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
-                motion = BW.warp_to_beats(motion, music.pulses).motion
+                motion = BW.warp_to_beats(motion, pulses).motion
         bas, chance = BW.alignment(motion, beats)
         return DanceResult(motion, out.genre, out.genre_probs, job.genre is not None,
-                           music.tempo, beats, bas, chance, warnings)  # fmt: skip
+                           tempo, beats, bas, chance, warnings)  # fmt: skip
 
 
 register_engine("dance", DanceEngine)

@@ -506,3 +506,36 @@ def test_downbeats_of_three_four():
     assert features.tempo == pytest.approx(90.0, rel=0.02)
     assert features.beats_per_bar == 3
     assert beat_tracking.beat_f_measure(features.downbeats, np.arange(bars) * 3 * period) > 0.9
+
+
+@pytest.mark.parametrize("bpm", [87.0, 174.0])
+def test_a_waltz_is_counted_in_the_threes_a_waltzer_steps(bpm):
+    """A 3/4 song with the hi-hat on every eighth: the general prior takes the level with
+    the strongest periodicity, the waltz's level is the one a slow waltz steps (84-90 bpm),
+    the beats are on the known beats or every other one of them, and no half-beats are
+    added to a waltz's pulses."""
+    song = beat_song("waltz", bpm, seconds=40.0)
+    features = audio_features.frame_features(song.samples, song.sr, 30.0)
+    assert features.beats_per_bar == 3
+    tempo, beats, pulses = features.for_genre("waltz")
+    assert tempo == pytest.approx(87.0, rel=0.02)
+    expected = song.beats if bpm < 100 else song.beats[::2]
+    other = song.beats[1::2]
+    assert max(beat_tracking.beat_f_measure(beats, expected),
+               beat_tracking.beat_f_measure(beats, other)) > 0.95  # fmt: skip
+    assert np.array_equal(pulses, beats)
+    assert features.for_genre(None) == (features.tempo, features.beats, features.pulses)
+
+
+def test_the_genre_chooses_among_the_tracked_pulse_s_levels_only():
+    """A 4/4 song at 70 bpm with eighth hats: a cha-cha steps it at 140, a waltz at 70; a 3/4
+    song at 124 bpm is never moved to two thirds of its beat (a prior over every lag did)."""
+    song = beat_song("backbeat", 70.0, seconds=40.0)
+    features = audio_features.frame_features(song.samples, song.sr, 30.0)
+    assert features.for_genre("cha-cha")[0] == pytest.approx(140.0, rel=0.02)
+    assert features.for_genre("waltz")[0] == pytest.approx(70.0, rel=0.02)
+    three = beat_song("waltz", 124.0, seconds=40.0)
+    waltz = audio_features.frame_features(three.samples, three.sr, 30.0)
+    for genre in beat_tracking.GENRE_TEMPO:
+        ratio = waltz.for_genre(genre)[0] / 124.0
+        assert min(abs(np.log2(ratio) - k) for k in (-1, 0, 1)) < 0.03, genre
