@@ -102,9 +102,14 @@ show-styles: $(VENV)/.dev
 # held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
 # contact score, AIST++ feature distances to real dance (development and test halves).
 DANCE_ARGS ?=
-.PHONY: dance-alignment train-dance export-dance eval-dance show-dance
+.PHONY: dance-alignment dance-tempo train-dance export-dance eval-dance show-dance
 dance-alignment: $(VENV)/.dev
 	$(PY) -m training.dance_alignment --write
+
+# Every shared song's tempo at the general and at its genre's level against its danced tempo
+# (the genre centres fitted with the song left out).
+dance-tempo: $(VENV)/.dev
+	$(PY) -m training.dance_tempo --json runs/eval/dance_tempo.json
 
 train-dance: $(VENV)/.dev
 	$(PY) -m training.dance --threads 2 $(if $(wildcard checkpoints/dance.pt),--resume) $(DANCE_ARGS)

@@ -13,13 +13,15 @@ reports: the AIST++ score (each kinematic beat, a local minimum of joint speed, 
 chance level (the same kinematic beats against the beat grid shifted by random fractions of
 a beat). Parts:
 
-- **generated beat test set** (``training/songs.beat_test_set``: 8 drum patterns x 5 tempi,
-  70-180 bpm, 60 s, beats known): the tracker's beat F-measure (70 ms; strict, and at any
+- **generated beat test set** (``training/songs.beat_test_set``: 9 drum patterns x 5 tempi,
+  70-180 bpm, 60 s, beats known; the 3/4 one danced as a waltz): the tracker's beat
+  F-measure (70 ms; strict, and at any
   metrical level: against the known beats, every other one, or the off-beats added), its
   tempo, downbeat F-measure; the dance's beat alignment against the *known* beats beside
   the shifted known grids; stalls;
 - **shared songs** (every Dance with Melody song, whole, its own genre): beat alignment
-  against the tracker's beats beside shifted grids; stalls. On the four held-out songs
+  against the tracker's beats and against the beats at the song's danced (else librosa's)
+  tempo (``training.dance_tempo``), beside shifted grids; stalls. On the four held-out songs
   (``training.dance.VAL_TAKES``, the part the real dance covers) also the real dance's
   alignment against the same tracker's beats, and the warp's share (no warp);
 - **ten minutes**: the held-out songs' music looped to 10 minutes, one generation per seed:
