@@ -29,7 +29,8 @@ mean of the danced, else tracked, tempi of the shared songs used to train the da
 (``python -m training.dance_tempo --fit``). A waltz is counted in threes at 84-90."""
 GENRE_TEMPO_OCTAVES = 0.25
 """Width of the genre's tempo prior (log-normal, in octaves): a level an octave off the
-genre's tempo pays 8 nats of periodicity."""
+genre's tempo pays 8 nats of periodicity. 0.15 to 0.7 octaves put the same shared songs at
+their danced tempo (``training.dance_tempo``)."""
 _ACF_CHUNK_FRAMES = 1024  # autocorrelation frames per batch: bounds the FFT matrix
 _ACF_STRIDE = 2  # autocorrelations of every other frame's excerpt: 8-s windows overlap anyway
 
@@ -91,10 +92,10 @@ def tempo_curve(
 
     With ``level_bpm`` (the tempo a dance genre steps, :data:`GENRE_TEMPO`) the metrical
     level is chosen as a listener who knows the dance would: among the global tempo's
-    levels (1/3, 1/2, 1, 2 and 3 times it, under ``max_bpm``), the one whose periodicity
-    and a log-normal prior of :data:`GENRE_TEMPO_OCTAVES` around ``level_bpm`` score best.
-    Only the tracked pulse's own levels compete: a prior alone over every lag moved
-    synthetic 3/4 songs onto two-thirds of their beat.
+    :data:`METRICAL_LEVELS` (it, its half, its third), the one whose periodicity and a
+    log-normal prior of :data:`GENRE_TEMPO_OCTAVES` around ``level_bpm`` score best. Only
+    the tracked pulse's own levels compete: a prior alone over every lag moved synthetic
+    3/4 songs onto two-thirds of their beat.
     """
     onset = np.asarray(onset, dtype=np.float64)
     if onset.size == 0 or not onset.any():
@@ -132,7 +133,12 @@ def at_level(
     return Tempo(float(60.0 * frame_rate / level), period, tempo.autocorrelation, tempo.block)
 
 
-METRICAL_LEVELS = (1.0 / 3.0, 0.5, 1.0, 2.0, 3.0)
+METRICAL_LEVELS = (1.0 / 3.0, 0.5, 1.0)
+"""The tempi, as multiples of the tracked one, a genre's level is chosen among: the tracked
+pulse or a slower level of it, so that every step still falls on a beat. Faster levels were
+tried: a cha-cha or a tango on a 70-bpm song then stepped every half beat, off the swung
+eighths and the half-time grooves of the generated test songs (alignment 1.4x its shifted
+grids); where a song accents its half beats, :func:`pulses` adds them anyway."""
 
 
 def _metrical_level(

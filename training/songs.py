@@ -188,6 +188,7 @@ def beat_song(pattern: str, bpm: float, seconds: float = 60.0, sr: int = SR, see
         for b, (t, p) in enumerate(zip(beats, period, strict=True)):
             chord = CHORDS[(b // 3) % 4]
             if b % 3 == 0:
+                hit(t, 3 * p, _chord(chord))  # the bar's chord rings on: no silence
                 hit(t, 0.3, _kick)
                 hit(t, 3 * p, _bass(chord[0] / 2))
             else:
