@@ -98,7 +98,8 @@ def test_dance_evaluation_records_its_summary(models):
         "generated_set": {"songs": [
             {"f_measure": 0.9, "passes": True, "dances": [{"stalls": 0}]},
             {"f_measure": 0.7, "passes": False, "dances": [{"stalls": 2}]}]},
-        "shared_songs": {"x": {"bas": 0.6, "chance": 0.3, "stalls": 0}},
+        "shared_songs": {"x": {"bas": 0.6, "chance": 0.3, "stalls": 0, "passes": True},
+                         "y": {"bas": 0.2, "chance": 0.3, "stalls": 1, "passes": False}},
         "machine": measuring_machine(),
     }  # fmt: skip
     EV.record_dance(report, models)
@@ -108,7 +109,8 @@ def test_dance_evaluation_records_its_summary(models):
     assert figures["ten_minutes"]["frames"] == 18000
     assert figures["generated_set"] == {"songs": 2, "tracker_f_measure": 0.8, "passing": 1,
                                         "stalls": 2}  # fmt: skip
-    assert figures["shared_songs"]["songs"] == 1
+    assert figures["shared_songs"]["songs"] == 2 and figures["shared_songs"]["stalls"] == 1
+    assert figures["shared_songs"]["passing_reference_beats"] == 1
     assert figures["feature_distances_test_half"] == {"kinetic": 1.5}
     assert figures["foot_contact_score"]["generated"] == 0.8
     assert "cores; BLAS kernels:" in figures["machine"]
