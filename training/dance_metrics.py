@@ -10,6 +10,8 @@ computed on canonical motion (numpy and scipy only).
   (FID_k, FID_g), after the papers' normalisation by a reference set's mean and std;
 - :func:`diversity`: the mean pairwise Euclidean distance of a set's (normalised) features
   (Div_k, Div_g);
+- :func:`feature_distances`: those distances per half and genre for ``make eval-dance``
+  (:func:`distance_table` prints them);
 - :func:`physical_foot_contact`: EDGE's physical foot contact score (Tseng et al. 2023):
   the hips' acceleration (upward acceleration kept, downward free fall not; divided by its
   peak in the clip) times the slower foot point's horizontal displacement of each foot,
@@ -284,3 +286,106 @@ def matched_frechet(
     rng = np.random.default_rng(seed)
     picks = [rng.choice(len(candidate), size, replace=False) for _ in range(draws)]
     return float(np.mean([frechet_distance(candidate[p], reference) for p in picks]))
+
+
+SEGMENT_SECONDS = 5.0  # the pieces whose features the distances compare
+HALVES = ("dev", "test")
+
+
+def _features(pieces: list[Motion]) -> dict[str, np.ndarray]:
+    rows = [dance_features(p) for p in pieces]
+    return {k: np.array([r[k] for r in rows]).reshape(len(rows), -1) for k in FEATURES}
+
+
+def feature_distances(held: list, train: list, generated: dict[str, list[Motion]]) -> dict:
+    """AIST++ kinetic and geometric feature distances per half and genre.
+
+    Pieces of ``SEGMENT_SECONDS``: of the real dance of each held-out song (the reference),
+    of the dances generated for it in its own genre (every seed), and of the real dances of
+    the training songs of that genre (the real-vs-real baseline: other songs). The
+    development half is the first half of each held-out song, the test half the second.
+    Features are normalised by the mean and std of every real piece of every song, the
+    generated and the other songs' sets compared to the reference at one size (the smaller
+    one's, ``matched_frechet``); diversity is the mean distance between a set's pieces.
+    """
+    genres = sorted({h[1] for h in held})
+    pieces = {half: {g: {"real": [], "generated": []} for g in genres} for half in HALVES}
+    for name, genre, real, _, _ in held:
+        middle = real.num_frames // 2
+        for half, (start, stop) in zip(HALVES, ((0, middle), (middle, None)), strict=True):
+            cut = pieces[half][genre]
+            cut["real"] += [p for _, p in segments(real, SEGMENT_SECONDS, start, stop)]
+            for out in generated.get(name, []):
+                cut["generated"] += [p for _, p in segments(out, SEGMENT_SECONDS, start, stop)]
+    others = {g: [p for genre, m in train if genre == g
+                  for _, p in segments(m, SEGMENT_SECONDS)] for g in genres}  # fmt: skip
+    other_features = {g: _features(v) for g, v in others.items()}
+    every_real = [p for half in pieces.values() for g in half.values() for p in g["real"]]
+    everything = _features(every_real + [p for v in others.values() for p in v])
+    normalise = {k: Normaliser(everything[k]) for k in FEATURES}
+    report: dict = {"segment_seconds": SEGMENT_SECONDS}
+    for half, by_genre in pieces.items():
+        rows = {}
+        pooled: dict[str, list] = {"real": [], "generated": [], "other_songs": []}
+        for genre, sets in by_genre.items():
+            feats = {
+                "real": _features(sets["real"]),
+                "generated": _features(sets["generated"]),
+                "other_songs": other_features[genre],
+            }
+            for key in pooled:
+                pooled[key].append(feats[key])
+            rows[genre] = _distance_row(feats, normalise)
+        merged = {k: {f: np.concatenate([x[f] for x in v]) for f in FEATURES}
+                  for k, v in pooled.items()}  # fmt: skip
+        rows["all"] = _distance_row(merged, normalise)
+        report[half] = rows
+    return report
+
+
+def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> dict:
+    counts = {k: len(v["kinetic"]) for k, v in feats.items()}
+    size = min(counts["generated"], counts["other_songs"])
+    row: dict = {"pieces": counts}
+    for kind in FEATURES:
+        real, gen, other = (normalise[kind](feats[k][kind])
+                            for k in ("real", "generated", "other_songs"))  # fmt: skip
+        to_generated = matched_frechet(gen, real, size)
+        to_other = matched_frechet(other, real, size)
+        row[kind] = {
+            "generated_to_real": round(to_generated, 2),
+            "other_songs_to_real": round(to_other, 2),
+            "ratio": round(to_generated / max(to_other, 1e-9), 2),
+            "diversity_generated": round(diversity(gen), 2),
+            "diversity_real": round(diversity(real), 2),
+            "diversity_other_songs": round(diversity(other), 2),
+        }
+    return row
+
+
+def distance_table(distances: dict) -> list[str]:
+    lines = [
+        f"Distance to real dance (AIST++ kinetic and geometric features of "
+        f"{distances['segment_seconds']:g}-s pieces, normalised by every real piece): Frechet "
+        "distance to the held-out songs' real dance of the dances generated for them, and of "
+        "the real dances of the other songs of the genre (real vs real), at one number of "
+        "pieces; the ratio of the two; diversity (mean distance between pieces) of the "
+        "generated and of the real held-out dance. Development half: the first half of each "
+        "song; test half: the second.",
+        "",
+        "| half | genre | pieces real / generated / other songs | FID_k generated / real vs "
+        "real (ratio) | FID_g generated / real vs real (ratio) | Div_k generated / real | "
+        "Div_g generated / real |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for half in HALVES:
+        for genre, row in distances[half].items():
+            k, g, n = row["kinetic"], row["geometric"], row["pieces"]
+            lines.append(
+                f"| {half} | {genre} | {n['real']} / {n['generated']} / {n['other_songs']} | "
+                f"{k['generated_to_real']:.1f} / {k['other_songs_to_real']:.1f} ({k['ratio']:.2f}) | "
+                f"{g['generated_to_real']:.1f} / {g['other_songs_to_real']:.1f} ({g['ratio']:.2f}) | "
+                f"{k['diversity_generated']:.1f} / {k['diversity_real']:.1f} | "
+                f"{g['diversity_generated']:.1f} / {g['diversity_real']:.1f} |"
+            )
+    return lines

@@ -33,7 +33,7 @@ a beat). Parts:
 - **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
   foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
   of the real held-out dances;
-- **distance to real dance** (:func:`feature_distances`): the AIST++ kinetic and geometric
+- **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++ kinetic and geometric
   feature distances of the dances generated for the held-out songs to their real dances,
   beside the real dances of the genre's other songs to the same, per genre, and diversity;
   the first half of each held-out song is the development half, the second the test half.
@@ -311,7 +311,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
         },  # fmt: skip
         "foot_sliding_cm_s": {k: round(float(np.mean(v)), 2) for k, v in sliding.items()},
         "foot_contact_score": {k: round(float(np.mean(v)), 3) for k, v in contact.items()},
-        "feature_distances": feature_distances(held, train, generated_dances),
+        "feature_distances": DM.feature_distances(held, train, generated_dances),
         "genre_accuracy": {
             "generated": round(hits / max(total, 1), 4),
             "real_held_out": round(float(np.mean(real_hits)), 4),
@@ -322,81 +322,6 @@ def held_out(engine, seeds: int, log=print) -> dict:
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
     }
-
-
-SEGMENT_SECONDS = 5.0  # the pieces whose features the distances compare
-HALVES = ("dev", "test")
-
-
-def _features(pieces: list[Motion]) -> dict[str, np.ndarray]:
-    rows = [DM.dance_features(p) for p in pieces]
-    return {k: np.array([r[k] for r in rows]).reshape(len(rows), -1) for k in DM.FEATURES}
-
-
-def feature_distances(held: list, train: list, generated: dict[str, list[Motion]]) -> dict:
-    """AIST++ kinetic and geometric feature distances per half and genre.
-
-    Pieces of ``SEGMENT_SECONDS``: of the real dance of each held-out song (the reference),
-    of the dances generated for it in its own genre (every seed), and of the real dances of
-    the training songs of that genre (the real-vs-real baseline: other songs). The
-    development half is the first half of each held-out song, the test half the second.
-    Features are normalised by the mean and std of every real piece of every song, the
-    generated and the other songs' sets compared to the reference at one size (the smaller
-    one's, ``matched_frechet``); diversity is the mean distance between a set's pieces.
-    """
-    genres = sorted({h[1] for h in held})
-    pieces = {half: {g: {"real": [], "generated": []} for g in genres} for half in HALVES}
-    for name, genre, real, _, _ in held:
-        middle = real.num_frames // 2
-        for half, (start, stop) in zip(HALVES, ((0, middle), (middle, None)), strict=True):
-            cut = pieces[half][genre]
-            cut["real"] += [p for _, p in DM.segments(real, SEGMENT_SECONDS, start, stop)]
-            for out in generated.get(name, []):
-                cut["generated"] += [p for _, p in DM.segments(out, SEGMENT_SECONDS, start, stop)]
-    others = {g: [p for genre, m in train if genre == g
-                  for _, p in DM.segments(m, SEGMENT_SECONDS)] for g in genres}  # fmt: skip
-    other_features = {g: _features(v) for g, v in others.items()}
-    every_real = [p for half in pieces.values() for g in half.values() for p in g["real"]]
-    everything = _features(every_real + [p for v in others.values() for p in v])
-    normalise = {k: DM.Normaliser(everything[k]) for k in DM.FEATURES}
-    report: dict = {"segment_seconds": SEGMENT_SECONDS}
-    for half, by_genre in pieces.items():
-        rows = {}
-        pooled: dict[str, list] = {"real": [], "generated": [], "other_songs": []}
-        for genre, sets in by_genre.items():
-            feats = {
-                "real": _features(sets["real"]),
-                "generated": _features(sets["generated"]),
-                "other_songs": other_features[genre],
-            }
-            for key in pooled:
-                pooled[key].append(feats[key])
-            rows[genre] = _distance_row(feats, normalise)
-        merged = {k: {f: np.concatenate([x[f] for x in v]) for f in DM.FEATURES}
-                  for k, v in pooled.items()}  # fmt: skip
-        rows["all"] = _distance_row(merged, normalise)
-        report[half] = rows
-    return report
-
-
-def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> dict:
-    counts = {k: len(v["kinetic"]) for k, v in feats.items()}
-    size = min(counts["generated"], counts["other_songs"])
-    row: dict = {"pieces": counts}
-    for kind in DM.FEATURES:
-        real, gen, other = (normalise[kind](feats[k][kind])
-                            for k in ("real", "generated", "other_songs"))  # fmt: skip
-        to_generated = DM.matched_frechet(gen, real, size)
-        to_other = DM.matched_frechet(other, real, size)
-        row[kind] = {
-            "generated_to_real": round(to_generated, 2),
-            "other_songs_to_real": round(to_other, 2),
-            "ratio": round(to_generated / max(to_other, 1e-9), 2),
-            "diversity_generated": round(DM.diversity(gen), 2),
-            "diversity_real": round(DM.diversity(real), 2),
-            "diversity_other_songs": round(DM.diversity(other), 2),
-        }
-    return row
 
 
 def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict:
@@ -472,34 +397,6 @@ def _pattern_table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _distance_table(distances: dict) -> list[str]:
-    lines = [
-        f"Distance to real dance (AIST++ kinetic and geometric features of "
-        f"{distances['segment_seconds']:g}-s pieces, normalised by every real piece): Frechet "
-        "distance to the held-out songs' real dance of the dances generated for them, and of "
-        "the real dances of the other songs of the genre (real vs real), at one number of "
-        "pieces; the ratio of the two; diversity (mean distance between pieces) of the "
-        "generated and of the real held-out dance. Development half: the first half of each "
-        "song; test half: the second.",
-        "",
-        "| half | genre | pieces real / generated / other songs | FID_k generated / real vs "
-        "real (ratio) | FID_g generated / real vs real (ratio) | Div_k generated / real | "
-        "Div_g generated / real |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for half in HALVES:
-        for genre, row in distances[half].items():
-            k, g, n = row["kinetic"], row["geometric"], row["pieces"]
-            lines.append(
-                f"| {half} | {genre} | {n['real']} / {n['generated']} / {n['other_songs']} | "
-                f"{k['generated_to_real']:.1f} / {k['other_songs_to_real']:.1f} ({k['ratio']:.2f}) | "
-                f"{g['generated_to_real']:.1f} / {g['other_songs_to_real']:.1f} ({g['ratio']:.2f}) | "
-                f"{k['diversity_generated']:.1f} / {k['diversity_real']:.1f} | "
-                f"{g['diversity_generated']:.1f} / {g['diversity_real']:.1f} |"
-            )
-    return lines
-
-
 def markdown(report: dict) -> str:
     gen = report["generated_set"]["songs"]
     lines = [
@@ -565,7 +462,7 @@ def markdown(report: dict) -> str:
         "Foot contact score: EDGE's physical foot contact score (x 10^4, 5-s pieces; lower: "
         "the hips accelerate only while a foot is planted).",
         "",
-        *_distance_table(report["feature_distances"]),
+        *DM.distance_table(report["feature_distances"]),
     ]
     g, t = report["genre_accuracy"], report["ten_minutes"]
     confusion = "; ".join(

@@ -110,7 +110,7 @@ def test_foot_contact_score_punishes_a_body_pushed_with_no_foot_planted():
 
 
 def test_feature_distances_of_a_copy_of_the_real_dance_are_nil():
-    from training.eval_dance import feature_distances
+    from training.dance_metrics import feature_distances
 
     frames = 600
     t = np.arange(frames) / FPS
