@@ -1,7 +1,11 @@
 """``motion-style``: restyle files or folders through a running service.
 
-    motion-style transfer FILES... --style NAME [--strength S] --url URL -o DIR
-    motion-style stylize FILES... --style NAME --url URL -o DIR
+    motion-style transfer FILES... (--style NAME | --mix JSON | --style-clip FILE)
+                         [--strength S] [GAME OPTIONS] --url URL -o DIR
+    motion-style stylize FILES... --style NAME [GAME OPTIONS] --url URL -o DIR
+
+    GAME OPTIONS: --keep-timing (no time warp: as many frames as sent), --root-motion
+    keep|in_place, --loop auto|true|false (whether the clip is a cycle to keep looping)
     motion-style dance SONGS... [--genre G] [--skeleton RIG] [--fps N] --url URL -o DIR
 
 A folder stands for the clips (or songs) in it and below it; each result is written under
@@ -222,15 +226,38 @@ async def run_all(request: Request, jobs: list[Job], args: argparse.Namespace) -
             progress.close()
 
 
+def game_fields(args: argparse.Namespace) -> dict[str, str]:
+    """The restyling options a game needs, sent only when asked for (the service's
+    defaults: the style's time warp, root motion kept, loops found by the service)."""
+    fields = {}
+    if args.keep_timing:
+        fields["time_warp"] = "false"
+    if args.root_motion:
+        fields["root_motion"] = args.root_motion
+    if args.loop:
+        fields["loop"] = args.loop
+    return fields
+
+
 def build_request(args: argparse.Namespace) -> Request:
     query = f"?format={args.format}" if getattr(args, "format", None) else ""
     if args.command == "transfer":
-        fields = {"style_name": args.style, "strength": repr(args.strength)}
+        fields = {"strength": repr(args.strength), **game_fields(args)}
+        extra = {}
+        if args.style:
+            fields["style_name"] = args.style
+        elif args.mix:
+            fields["style_mix"] = args.mix
+        else:
+            clip = Path(args.style_clip)
+            media = MEDIA_TYPES.get(clip.suffix.lower(), "application/octet-stream")
+            extra["style"] = (clip.name, clip.read_bytes(), media)
         if args.mapping:
             fields["mapping"] = args.mapping
-        return Request("/v1/transfer" + query, "content", fields)
+        return Request("/v1/transfer" + query, "content", fields, extra)
     if args.command == "stylize":
-        return Request("/v1/stylize" + query, "content", {"style_name": args.style})
+        fields = {"style_name": args.style, **game_fields(args)}
+        return Request("/v1/stylize" + query, "content", fields)
     fields = {"fps": repr(args.fps)}
     if args.genre:
         fields["genre"] = args.genre
@@ -269,14 +296,38 @@ def parser() -> argparse.ArgumentParser:
         sub.add_argument("--format", choices=("bvh", "glb", "fbx", "json"), help="answer format")
         sub.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
-    transfer = commands.add_parser("transfer", help="the translator: any named style")
+    def game(sub: argparse.ArgumentParser) -> None:
+        sub.add_argument(
+            "--keep-timing",
+            action="store_true",
+            help="no time warp: the result has the clip's frames and length",
+        )
+        sub.add_argument(
+            "--root-motion",
+            choices=("keep", "in_place"),
+            help="keep the travel (the service's default) or hold the hips in place",
+        )
+        sub.add_argument(
+            "--loop",
+            choices=("auto", "true", "false"),
+            help="the clip is a cycle to keep looping (auto: the service finds out)",
+        )
+
+    transfer = commands.add_parser("transfer", help="the translator: a style by name, mix or clip")
     common(transfer, "BVH, GLB or FBX")
-    transfer.add_argument("--style", required=True, help="style name (GET /v1/styles)")
+    style = transfer.add_mutually_exclusive_group(required=True)
+    style.add_argument("--style", help="style name (GET /v1/styles)")
+    style.add_argument(
+        "--mix", help='styles mixed, JSON name -> weight: \'{"happy": 0.7, "old": 0.3}\''
+    )
+    style.add_argument("--style-clip", metavar="FILE", help="a clip (BVH, GLB or FBX) in the style")
     transfer.add_argument("--strength", type=float, default=1.0, help="0..1 (1)")
     transfer.add_argument("--mapping", help="JSON joint-name map for rigs not mapped by name")
+    game(transfer)
     stylize = commands.add_parser("stylize", help="the fast per-style networks")
     common(stylize, "BVH, GLB or FBX")
     stylize.add_argument("--style", required=True, help="style name (GET /v1/styles)")
+    game(stylize)
     dance = commands.add_parser("dance", help="a dance for each song")
     common(dance, "audio (wav, flac, ogg, mp3)")
     dance.add_argument("--genre", help="dance genre; predicted when absent")
@@ -294,18 +345,21 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "transfer" and not 0.0 <= args.strength <= 1.0:
         print("motion-style: --strength must lie in 0..1", file=sys.stderr)
         return 2
-    if args.command == "transfer" and args.mapping:
-        try:
-            json.loads(args.mapping)
-        except ValueError:
-            print("motion-style: --mapping is not JSON", file=sys.stderr)
-            return 2
+    for option in ("mapping", "mix"):
+        value = getattr(args, option, None)
+        if value:
+            try:
+                json.loads(value)
+            except ValueError:
+                print(f"motion-style: --{option} is not JSON", file=sys.stderr)
+                return 2
     suffixes = AUDIO_SUFFIXES if args.command == "dance" else CLIP_SUFFIXES
     jobs, problems = collect(args.files, suffixes, args.out)
     try:
         request = build_request(args)
     except OSError as exc:
-        print(f"motion-style: cannot read the skeleton: {exc}", file=sys.stderr)
+        what = "the style clip" if args.command == "transfer" else "the skeleton"
+        print(f"motion-style: cannot read {what}: {exc}", file=sys.stderr)
         return 2
     outcomes = asyncio.run(run_all(request, jobs, args)) if jobs else []
     failed = [o for o in outcomes if o.error]

@@ -4,7 +4,7 @@ zip, imports the clip (BVH, or a GLB through Blender's glTF importer), loads the
 runs ``motion_style.transfer`` on the armature, and writes what happened to
 OUT_FOLDER/report.json, with BVH exports of the action before (before.bvh) and after
 (after.bvh) for the test to compare with the service's answer, and the scene saved as
-OUT_FOLDER/scene.blend.
+OUT_FOLDER/scene.blend; then restyles the original once more with "Keep timing".
 
 KEY_SOURCE ``preferences``: the service needs a key; the driver first loads the styles
 without one, then puts ``$MOTION_STYLE_TEST_KEY`` in the add-on's preferences.
@@ -95,6 +95,17 @@ def main():
         report["bad_style"] = str(exc)
     report["action_after_bad_style"] = armature.animation_data.action.name
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(out, "scene.blend"), compress=False)
+    # "Keep timing": the original restyled again without the time warp
+    armature.animation_data.action = original
+    bpy.context.scene.motion_style_keep_timing = True
+    report["panel_keep_timing"] = bpy.context.scene.motion_style_keep_timing
+    report["kept_timing"] = sorted(
+        bpy.ops.motion_style.transfer(
+            server=server, style_name=style, strength=float(strength), keep_timing=True
+        )
+    )
+    kept = armature.animation_data.action
+    report.update(kept_timing_action=kept.name, kept_timing_range=list(kept.frame_range))
     with open(os.path.join(out, "report.json"), "w") as f:
         json.dump(report, f)
 

@@ -1,9 +1,10 @@
 """The Blender add-on in headless Blender (Debian's 3.4, ``blender -b``) against the real
 service, which needs an API key: installed from the zip ``make blender-addon`` builds, it
-restyles an imported BVH's action into a new action on the same armature, keeping the
-original, and the new action performs exactly the service's answer. The key comes from the
-add-on's preferences (after a refusal without it) or ``$MOTION_API_KEY``, and the saved
-.blend file does not hold it."""
+restyles an imported BVH's action into a new action on the same armature, named after the
+style, keeping the original, and the new action performs exactly the service's answer;
+with "Keep timing" it is as long as the original. The key comes from the add-on's
+preferences (after a refusal without it) or ``$MOTION_API_KEY``, and the saved .blend file
+does not hold it."""
 
 from __future__ import annotations
 
@@ -78,6 +79,7 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, key_source
     assert expected.num_frames == frames != 60  # elderly is slower: the time warp stretches it
     new, original = report["active_action"], report["original"]
     assert new != original and report["actions"] == sorted([original, new])
+    assert new == f"{original}.elderly"  # named after the style
     first, last = report["active_range"]
     assert last - first + 1 == frames and report["keys"] == frames
     assert report["original_kept"] and report["original_fake_user"]
@@ -93,6 +95,10 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, key_source
     scene = (tmp_path / "scene.blend").read_bytes()
     assert new.encode() in scene  # the saved file holds the new action, not the key
     assert key.encode() not in scene and key.removeprefix("msk_")[:12].encode() not in scene
+    # "Keep timing": no time warp, the new action as long as the original
+    assert report["kept_timing"] == ["FINISHED"]
+    assert report["kept_timing_range"] == report["original_range"]
+    assert report["kept_timing_action"].startswith(f"{original}.elderly")
 
     # the new action performs the service's answer: same joint positions every frame
     performed = bvh.load(tmp_path / "after.bvh")

@@ -1,9 +1,11 @@
 """Motion Style: restyle the active armature's action through a motion-style service.
 
 A panel in the 3D view's sidebar (N, tab "Motion Style"): server URL, style (from the
-service's ``GET /v1/styles``), strength, Restyle. The operator ``motion_style.transfer``
-(properties ``server``, ``style_name``, ``strength``) also runs from scripts and in
-``blender -b``; the result becomes a new action on the same armature, the original kept.
+service's ``GET /v1/styles``), strength, Keep timing (no time warp: the new action as long
+as the original), Restyle. The operator ``motion_style.transfer`` (properties ``server``,
+``style_name``, ``strength``, ``keep_timing``) also runs from scripts and in ``blender
+-b``; the result becomes a new action named after the original and the style
+("Walk.elderly") on the same armature, the original kept.
 
 A service that needs an API key gets the one in the add-on's preferences (Edit >
 Preferences > Add-ons > Motion Style), else ``$MOTION_API_KEY``. Preferences live in
@@ -93,6 +95,9 @@ class MOTION_STYLE_OT_transfer(bpy.types.Operator):
     server: bpy.props.StringProperty(name="Server", default=DEFAULT_SERVER)
     style_name: bpy.props.StringProperty(name="Style", default="")
     strength: bpy.props.FloatProperty(name="Strength", default=1.0, min=0.0, max=1.0)
+    keep_timing: bpy.props.BoolProperty(
+        name="Keep timing", default=False, description="no time warp: as many frames as sent"
+    )
 
     @classmethod
     def poll(cls, context):
@@ -108,7 +113,13 @@ class MOTION_STYLE_OT_transfer(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             action = restyle.restyle(
-                context, obj, self.server, self.style_name, self.strength, api_key(context)
+                context,
+                obj,
+                self.server,
+                self.style_name,
+                self.strength,
+                api_key(context),
+                self.keep_timing,
             )
         except service.ServiceError as exc:
             self.report({"ERROR"}, f"Motion Style: {exc}")
@@ -131,10 +142,12 @@ class VIEW3D_PT_motion_style(bpy.types.Panel):
         row.prop(scene, "motion_style_style")
         row.operator(MOTION_STYLE_OT_refresh_styles.bl_idname, text="", icon="FILE_REFRESH")
         layout.prop(scene, "motion_style_strength")
+        layout.prop(scene, "motion_style_keep_timing")
         op = layout.operator(MOTION_STYLE_OT_transfer.bl_idname, icon="ARMATURE_DATA")
         op.server = scene.motion_style_server
         op.style_name = scene.motion_style_style
         op.strength = scene.motion_style_strength
+        op.keep_timing = scene.motion_style_keep_timing
         obj, problem = active_armature(context)
         if problem:
             layout.label(text=problem, icon="INFO")
@@ -160,10 +173,20 @@ def register():
     bpy.types.Scene.motion_style_strength = bpy.props.FloatProperty(
         name="Strength", default=1.0, min=0.0, max=1.0, description="0 keeps the clip, 1 full style"
     )
+    bpy.types.Scene.motion_style_keep_timing = bpy.props.BoolProperty(
+        name="Keep timing",
+        default=False,
+        description="no time warp: the new action has as many frames as the original",
+    )
 
 
 def unregister():
-    for name in ("motion_style_server", "motion_style_style", "motion_style_strength"):
+    for name in (
+        "motion_style_server",
+        "motion_style_style",
+        "motion_style_strength",
+        "motion_style_keep_timing",
+    ):
         delattr(bpy.types.Scene, name)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

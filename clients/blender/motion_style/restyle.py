@@ -139,8 +139,17 @@ def remove_scratch(scratch) -> None:
         bpy.data.actions.remove(action)
 
 
-def restyle(context, obj, server: str, style_name: str, strength: float, api_key: str = ""):
-    """The new action (assigned to ``obj``; the original is kept with a fake user)."""
+def restyle(
+    context,
+    obj,
+    server: str,
+    style_name: str,
+    strength: float,
+    api_key: str = "",
+    keep_timing: bool = False,
+):
+    """The new action, named after the original and the style (assigned to ``obj``; the
+    original is kept with a fake user); ``keep_timing``: as many frames as the original."""
     original = obj.animation_data.action
     start, _ = action_frames(obj)
     frame = context.scene.frame_current
@@ -149,7 +158,9 @@ def restyle(context, obj, server: str, style_name: str, strength: float, api_key
         sent, answer = os.path.join(folder, "content.bvh"), os.path.join(folder, "result.bvh")
         export_bvh(context, obj, sent)
         with open(sent, "rb") as f:
-            result = service.transfer(server, f.read(), style_name, strength, api_key)
+            result = service.transfer(
+                server, f.read(), style_name, strength, api_key, keep_timing=keep_timing
+            )
         with open(answer, "wb") as f:
             f.write(result)
         frames = frames_in(result)

@@ -60,11 +60,16 @@ def transfer(
     strength: float,
     api_key: str = "",
     timeout: float = 300.0,
+    keep_timing: bool = False,
 ) -> bytes:
-    """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``."""
+    """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``; with
+    ``keep_timing`` without the style's time warp (as many frames as sent)."""
     boundary = uuid.uuid4().hex
     parts = []
-    for name, value in (("style_name", style_name), ("strength", repr(float(strength)))):
+    fields = [("style_name", style_name), ("strength", repr(float(strength)))]
+    if keep_timing:
+        fields.append(("time_warp", "false"))
+    for name, value in fields:
         parts.append(
             f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"\r\n\r\n{value}\r\n'.encode()
         )
