@@ -73,13 +73,14 @@ class Loop:
 
 
 def detect(motion: Motion, force: bool = False) -> Loop | None:
-    """Whether the canonical ``motion`` (at 30 fps) loops (module docstring); with ``force`` (the client
-    says it does) it is taken as one in any case, closed when its ends are within
-    :data:`CLOSED_GAP`."""
+    """Whether the canonical ``motion`` loops (module docstring): closed when its ends are
+    within :data:`CLOSED_GAP` of a step at its own rate, open within :data:`OPEN_GAP` of a
+    step at 30 fps (a step at 120 fps is a quarter of one); with ``force`` (the client says
+    it loops) it is taken as one in any case."""
     gap = gap_in_steps(motion)
     if gap <= CLOSED_GAP:
         return Loop(True, gap)
-    if gap <= OPEN_GAP or (force and motion.num_frames >= 3):
+    if gap * C.FPS / motion.fps <= OPEN_GAP or (force and motion.num_frames >= 3):
         return Loop(False, gap)
     return None
 
@@ -110,23 +111,57 @@ def _moved(motion: Motion, turn: float, shift: np.ndarray) -> Motion:
 
 def closed(motion: Motion, loop: Loop) -> Motion:
     """A canonical looping ``motion`` as a closed cycle: an open one gains a last frame,
-    its first moved on by the travel and turn of its last step."""
+    its first moved on by the travel and turn of its last step. Where the last frame does
+    not lead into that one (a clip taken as a loop whatever its gap), what it misses is
+    spread over the clip, nothing at the first frame and all of it at the new last one, so
+    the cycle runs on without a jump."""
     if loop.closed:
         return motion
     frames = motion.num_frames
-    turn, shift = _travel(motion, frames - 1)
+    turn, _ = _travel(motion, frames - 1)
     step_turn, _ = _travel(motion.slice(frames - 2), 1)
-    # one cycle of frames steps: the travel to the last frame, and one step more
-    per_step = turn / max(frames - 1, 1)
-    turn_total = turn + (step_turn if frames > 2 else per_step)
-    first = motion.slice(0, 1)
+    turn_total = turn + step_turn
     hips = K.global_positions(motion)[:, HIPS]
     end = hips[-1] + (hips[-1] - hips[-2])
     start = R.apply(R.about_y(turn_total), hips[0] * [1.0, 0.0, 1.0])
-    closing = _moved(first, turn_total, (end - start)[[0, 2]])
+    closing = _moved(motion.slice(0, 1), turn_total, (end - start)[[0, 2]])
+    # the frame after the last as its last step would make it, against the closing frame
+    step = R.mul(motion.lrot[-1], R.inv(motion.lrot[-2]))
+    after_rot = R.mul(step, motion.lrot[-1])
+    after_pos = 2 * motion.lpos[-1] - motion.lpos[-2]
+    residual = R.mul(after_rot, R.inv(closing.lrot[0]))  # after = residual * closing
+    weight = np.arange(frames) / frames
+    undo = R.slerp(
+        np.broadcast_to(R.IDENTITY, (frames, *residual.shape)),
+        np.broadcast_to(R.inv(residual), (frames, *residual.shape)),
+        weight[:, None],
+    )
+    lrot = R.mul(undo, motion.lrot)
+    lpos = motion.lpos - weight[:, None, None] * (after_pos - closing.lpos[0])[None]
     return motion.replace(
-        lrot=np.concatenate([motion.lrot, closing.lrot]),
-        lpos=np.concatenate([motion.lpos, closing.lpos]),
+        lrot=R.make_continuous(np.concatenate([lrot, closing.lrot])),
+        lpos=np.concatenate([lpos, closing.lpos]),
+    )
+
+
+def with_closing_frame(motion: Motion, up: np.ndarray | None = None) -> Motion:
+    """An open cycle on any rig with its first frame again after its last, the root
+    joints' place on the floor carried one step on (in the upright world: ``up`` turns the
+    file's world so +Y is up), their height the first frame's: what :func:`closed` adds on
+    the canonical skeleton, for the joints a rig has beyond it."""
+    up = R.IDENTITY if up is None else np.asarray(up, dtype=np.float64)
+    roots = np.nonzero(motion.skeleton.parents < 0)[0]
+    upright = R.apply(up, motion.lpos[:, roots])
+    if motion.num_frames > 1:
+        after = upright[-1] + (upright[-1] - upright[-2])
+    else:
+        after = upright[-1].copy()
+    after[:, 1] = upright[0, :, 1]
+    lpos = motion.lpos[:1].copy()
+    lpos[0, roots] = R.apply(R.inv(up), after)
+    return motion.replace(
+        lrot=np.concatenate([motion.lrot, motion.lrot[:1]]),
+        lpos=np.concatenate([motion.lpos, lpos]),
     )
 
 

@@ -11,6 +11,15 @@ the file that was sent with the new animation in place of its old one
 (:meth:`motion.gltf.GltfFile.write`, :meth:`service.fbx.FbxFile.write`); ``json`` carries the
 result as BVH text on the rig that was read.
 
+Game invariants (:class:`GameOptions`, for a clip to restyle): leading reference frames (a
+bind or T-pose before the motion, :mod:`motion.reference`) are cut off before the clip goes
+onto the canonical skeleton and put back unchanged in front of the answer, with a warning; a
+looping clip (:mod:`motion.loops`: found, or ``loop=true``; ``loop=false`` looks for none)
+goes on as a closed cycle (an open one gains its first frame at the end, taken off the
+answer again) resampled to 30 fps end to end, so the engines can wrap it around and its
+answer ends where it starts; ``root_motion=in_place`` takes the hips' travel on the floor
+out of the answer (:mod:`motion.root_motion`).
+
 Errors: a malformed BVH is a 400 problem with ``line``, a malformed glTF a 400; more than
 ``max_frames`` frames (in or out) a 413 with ``limit``; a skeleton that cannot be mapped a
 422 with ``unmapped``; ``format=glb`` (``fbx``) without a glTF (FBX) file to write into a
@@ -23,16 +32,32 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import BinaryIO, Literal
 
-from motion import bvh, gltf, retarget
+import numpy as np
+
+from motion import bvh, gltf, loops, retarget
 from motion import canonical as C
+from motion import kinematics as K
 from motion.errors import MotionError
 from motion.features import time_warp
+from motion.reference import leading_reference_frames, rest_on_canonical
+from motion.root_motion import in_place
 from motion.skeleton import Motion
 from service import fbx, limits, metrics
 from service.config import Settings
 from service.errors import InvalidRequest, PayloadTooLarge
 
 Format = Literal["bvh", "glb", "fbx", "json"]
+LoopMode = Literal["auto", "true", "false"]
+RootMotion = Literal["keep", "in_place"]
+
+
+@dataclass(frozen=True)
+class GameOptions:
+    """What a game asks of a restyled clip: ``loop`` (auto: found from the clip, true: it
+    loops, false: it does not) and ``root_motion`` (keep, or in_place)."""
+
+    loop: str = "auto"
+    root_motion: str = "keep"
 
 
 @dataclass
@@ -70,6 +95,11 @@ class Clip:
     canonical: Motion
     file: gltf.GltfFile | fbx.FbxFile | None = None
     answer: str = "bvh"
+    reference: Motion | None = None  # leading reference frames, cut off ``original``
+    loop: loops.Loop | None = None  # a cycle: ``canonical`` is closed, 30 fps end to end
+    closing: bool = False  # ``original`` (an open cycle) gained its first frame at the end
+    root_motion: str = "keep"
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def format(self) -> str:
@@ -154,11 +184,13 @@ def load_clip(
     prefix: str = "",
     answer: str | None = None,
     rest_if_unanimated: bool = False,
+    game: GameOptions | None = None,
 ) -> Clip:
     """Read (400 when empty), parse BVH or glTF (400, with ``line`` for BVH), check frames
     (413 with ``limit``), check the ``answer`` format asked for (:func:`answer_format`, 400),
-    map the skeleton (422 with ``unmapped``) and retarget to canonical at 30 fps. Stages are
-    timed as ``<prefix>parse`` and ``<prefix>retarget``."""
+    map the skeleton (422 with ``unmapped``) and retarget to canonical at 30 fps; with
+    ``game`` (a clip to restyle) its reference frames and loop as the module docstring
+    says. Stages are timed as ``<prefix>parse`` and ``<prefix>retarget``."""
     what = source.field
     with timer.stage(prefix + "parse"):
         original, parsed = read_motion(source, settings, rest_if_unanimated=rest_if_unanimated)
@@ -166,9 +198,46 @@ def load_clip(
     answer = answer_format(file_format(parsed), answer)
     with timer.stage(prefix + "retarget"):
         rig = retarget.make_rig(original.skeleton, original, mapping=mapping)
-        canonical = retarget.to_canonical(original, rig, fps=C.FPS)
-    limits.check_frames(canonical, settings, what=what)
-    return Clip(original, rig, canonical, parsed, answer)
+        if game is None:
+            clip = Clip(original, rig, retarget.to_canonical(original, rig, fps=C.FPS), parsed)
+        else:
+            clip = game_clip(original, rig, game, parsed)
+    limits.check_frames(clip.canonical, settings, what=what)
+    clip.answer = answer
+    return clip
+
+
+def game_clip(
+    original: Motion,
+    rig: retarget.Rig,
+    game: GameOptions,
+    parsed: gltf.GltfFile | fbx.FbxFile | None,
+) -> Clip:
+    """A clip to restyle: leading reference frames cut off, a cycle closed (module
+    docstring)."""
+    full = retarget.to_canonical(original, rig, fps=None)
+    warnings = []
+    count = leading_reference_frames(full, rest_on_canonical(rig, original.fps))
+    reference = original.slice(0, count) if count else None
+    if count:
+        original, full = original.slice(count), full.slice(count)
+        warnings.append(
+            f"the first {'frame is a' if count == 1 else f'{count} frames are'} reference "
+            "pose (bind or T-pose, then a jump to the motion): given back unchanged, not "
+            "restyled"
+        )
+    loop = None if game.loop == "false" else loops.detect(full, force=game.loop == "true")
+    closing = loop is not None and not loop.closed
+    if closing:
+        full = loops.closed(full, loop)
+        original = loops.with_closing_frame(original, rig.up)
+    if loop is None:
+        canonical = K.resample(full, C.FPS)
+    else:  # the cycle's ends stay its ends at 30 fps
+        steps = max(int(round((full.num_frames - 1) * C.FPS / full.fps)), 2)
+        canonical = K.resample_at(full, np.linspace(0, full.num_frames - 1, steps + 1), C.FPS)
+    return Clip(original, rig, canonical, parsed, reference=reference, loop=loop,
+                closing=closing, root_motion=game.root_motion, warnings=warnings)  # fmt: skip
 
 
 @dataclass
@@ -190,6 +259,7 @@ class Result:
     format: str = "bvh"
     binary: bytes | None = None
     source_format: str = "bvh"
+    loop: bool | None = None  # whether the clip was taken as a loop (None: no clip to say)
 
 
 def write_result(
@@ -220,9 +290,12 @@ def write_result(
         clip = dataclasses.replace(clip, original=original)
     if clip is not None:
         with timer.stage("retarget_back"):
-            out = retarget.from_canonical(
-                canon, clip.rig, like=clip.original if like_clip else None
-            )
+            like = clip.original if like_clip else None
+            if clip.loop is not None and like is not None:  # end to end, as the cycle went in
+                times = np.linspace(0, canon.num_frames - 1, like.num_frames)
+                canon = K.resample_at(canon, times, like.fps)
+            out = retarget.from_canonical(canon, clip.rig, like=like)
+            out = finished_on_rig(clip, out)
     else:
         out = canon
     if fps is not None:
@@ -236,8 +309,26 @@ def write_result(
             text = bvh.dumps(out)
     rig = clip.rig.report() if clip is not None else None
     source = clip.format if clip is not None else "bvh"
-    return Result(text, out.num_frames, float(out.fps), list(warnings), suffix, rig,
-                  format=answer, binary=binary, source_format=source)  # fmt: skip
+    warnings = [*(clip.warnings if clip is not None else ()), *warnings]
+    loop = None if clip is None else clip.loop is not None
+    return Result(text, out.num_frames, float(out.fps), warnings, suffix, rig,
+                  format=answer, binary=binary, source_format=source, loop=loop)  # fmt: skip
+
+
+def finished_on_rig(clip: Clip, out: Motion) -> Motion:
+    """The answer on the clip's rig as the game asked: an open cycle's closing frame taken
+    off, the travel taken out for ``in_place``, the reference frames put back in front."""
+    if clip.closing:
+        out = out.slice(0, -1)
+    if clip.root_motion == "in_place":
+        out = in_place(out, clip.rig.mapping["Hips"], clip.rig.up)
+    if clip.reference is not None:
+        reference = clip.reference
+        out = out.replace(
+            lrot=np.concatenate([reference.lrot, out.lrot]),
+            lpos=np.concatenate([reference.lpos, out.lpos]),
+        )
+    return out
 
 
 def name_the_clip(exc: Exception, what: str) -> None:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from service.clips import Upload
+from service.clips import GameOptions, Upload
 from service.metrics import StageTimer
 from service.registered_styles import RegisteredStyle
 
@@ -44,6 +44,7 @@ class TransferRequest:
     foot_cleanup: bool = True
     mapping: dict[str, str] | None = None
     format: str | None = None  # of the answer; None: the content's
+    game: GameOptions = field(default_factory=GameOptions)
 
 
 @dataclass
@@ -115,6 +116,7 @@ class StylizeRequest:
     time_warp: bool = True
     mapping: dict[str, str] | None = None
     format: str | None = None  # of the answer; None: the content's
+    game: GameOptions = field(default_factory=GameOptions)
 
 
 # --- dance ------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ style's speed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,10 +28,13 @@ from service.engines import register_engine
 from service.engines.base import Engine
 from service.engines.restyling import (
     BUCKET,
+    anatomical,
     clamp_warp,
     pad_mirrored,
     padded_length,
     restyled_motion,
+    speed_capped,
+    wrapped,
 )
 from service.errors import NotFound
 from service.metrics import StageTimer
@@ -48,6 +51,7 @@ class FastJob:
     foot_cleanup: bool = True
     time_warp: bool = True
     clip: Clip | None = None
+    loop: bool = False  # ``content`` is a closed cycle, to wrap around
 
 
 @dataclass
@@ -57,6 +61,7 @@ class Stylized:
 
     motion: Motion
     warp: float
+    warnings: list[str] = field(default_factory=list)
 
 
 class FastEngine(Engine):
@@ -109,11 +114,10 @@ class FastEngine(Engine):
     # --- the three steps ---------------------------------------------------------------------
 
     def prepare(self, request: StylizeRequest, timer: StageTimer) -> FastJob:
-        clip = load_clip(
-            request.content, self.settings, timer, mapping=request.mapping, answer=request.format
-        )
+        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping,
+                         answer=request.format, game=request.game)  # fmt: skip
         return FastJob(clip.canonical, request.style_name, request.foot_cleanup,
-                       request.time_warp, clip)  # fmt: skip
+                       request.time_warp, clip, loop=clip.loop is not None)  # fmt: skip
 
     def predict(self, job: FastJob, timer: StageTimer) -> Stylized:
         """The family's core: the style's network on the content, finished at the style's
@@ -121,8 +125,8 @@ class FastEngine(Engine):
         style = self.style_of(job.style)
         if style is None:
             raise self._unknown(job.style)
-        content = job.content
         with timer.stage("features"):
+            content, cycle = wrapped(job.content, job.loop, max(self.margin, BUCKET))
             enc = Fe.encode(content)
             x, offset = self.network_input(enc)
         with timer.stage("network"):
@@ -130,16 +134,21 @@ class FastEngine(Engine):
         channels = output[0, :, offset : offset + content.num_frames].T
         motion = restyled_motion(channels, content, enc, self.stats, timer, self.output_smoothing,
                                  self.strength_of(style), job.foot_cleanup)  # fmt: skip
-        factor = self.warp_factor(style) if job.time_warp else 1.0
+        with timer.stage("anatomy"):
+            motion = anatomical(motion, cycle)
+        warnings: list[str] = []
+        factor = 1.0
+        if job.time_warp:
+            factor, warnings = speed_capped(self.warp_factor(style), motion)
         if factor != 1.0:
             with timer.stage("time_warp"):
                 motion = Fe.time_warp(motion, factor)
-        return Stylized(motion, factor)
+        return Stylized(motion, factor, warnings)
 
     def finish(self, job: FastJob, out: Stylized, timer: StageTimer) -> Result:
         style = self.style_of(job.style)
         return write_result(job.clip, out.motion, self.settings, timer, suffix=style,
-                            warp=out.warp)  # fmt: skip
+                            warp=out.warp, warnings=out.warnings)  # fmt: skip
 
     def network_input(self, enc: Fe.Encoded) -> tuple[np.ndarray, int]:
         """The networks' input ``(1, C, T)`` of an encoded canonical clip: the restyler's

@@ -9,8 +9,11 @@ rotation goes that part of the way from the content's own to the restyled one (0
 content back); the content's root trajectory (``features.decode_motion``); the feet planted
 where the CONTENT's are, held on the content's floor (the knees bend to reach it down to
 ``grounding.KNEE_ABSORB`` of a leg, the hips move for the rest), and the feet the content
-has in the air kept clear of the floor (``grounding.pin_canonical_feet``). A time warp
-follows, clamped to [``MIN_WARP``, ``MAX_WARP``].
+has in the air kept clear of the floor (``grounding.pin_canonical_feet``); a looping clip's
+cycle, which ran wrapped around (:func:`wrapped`), cut back (:func:`anatomical`); knees
+and elbows bent only the way they bend, after every clean-up step. A time warp follows,
+clamped to [``MIN_WARP``, ``MAX_WARP``] and lowered where a joint would move faster than
+real mocap does (:func:`speed_capped`).
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from scipy.ndimage import gaussian_filter1d
 from motion import contacts as CT
 from motion import features as Fe
 from motion import grounding
+from motion.anatomy import SPEED_LIMIT, capped_warp, hinged
+from motion.loops import Cycle
 from motion.skeleton import Motion
 from service.metrics import StageTimer
 
@@ -75,3 +80,34 @@ def restyled_motion(
                 motion, contacts, floor_of=content, floor_positions=feet
             )
     return motion
+
+
+def wrapped(content: Motion, loop: bool, margin: int) -> tuple[Motion, Cycle | None]:
+    """A looping clip's canonical cycle (closed: its last frame its first moved on, as
+    ``service.clips.load_clip`` makes it) with ``margin`` frames of itself before and after
+    (:class:`motion.loops.Cycle`), so the networks' windows, the smoothing and the foot
+    clean-up see it wrap around; anything else as it is."""
+    if not loop:
+        return content, None
+    cycle = Cycle.of(content, margin)
+    return cycle.extended(content), cycle
+
+
+def anatomical(motion: Motion, cycle: Cycle | None) -> Motion:
+    """A restyled canonical motion cut back to its cycle (when it was :func:`wrapped`) and
+    with its knees and elbows bent only the way they bend (:func:`motion.anatomy.hinged`)."""
+    if cycle is not None:
+        motion = cycle.cropped(motion)
+    return hinged(motion)
+
+
+def speed_capped(factor: float, motion: Motion) -> tuple[float, list[str]]:
+    """A time-warp ``factor`` lowered so no joint of the warped ``motion`` moves faster than
+    real mocap does (:func:`motion.anatomy.capped_warp`), and a warning when it was."""
+    capped = capped_warp(factor, motion)
+    if capped >= factor:
+        return factor, []
+    return capped, [
+        f"time warp {factor:.3f} lowered to {capped:.3f}: faster, a joint would move over "
+        f"{SPEED_LIMIT:g} body heights a second (real mocap's fastest: 6.8)"
+    ]

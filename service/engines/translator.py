@@ -42,9 +42,12 @@ from service.engines.restyling import (
     BUCKET,
     MAX_WARP,
     MIN_WARP,
+    anatomical,
     pad_mirrored,
     padded_length,
     restyled_motion,
+    speed_capped,
+    wrapped,
 )
 from service.errors import NotFound
 from service.metrics import StageTimer
@@ -87,6 +90,7 @@ class TransferJob:
     time_warp: bool = True
     foot_cleanup: bool = True
     clip: Clip | None = None
+    loop: bool = False  # ``content`` is a closed cycle, to wrap around
 
 
 @dataclass
@@ -212,11 +216,10 @@ class TranslatorEngine(Engine):
         style = self._style_input(request.style, timer)
         if isinstance(request, StyleCodeRequest):
             return StyleCodeJob(style)
-        clip = load_clip(
-            request.content, self.settings, timer, mapping=request.mapping, answer=request.format
-        )
+        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping,
+                         answer=request.format, game=request.game)  # fmt: skip
         return TransferJob(clip.canonical, style, request.strength, request.time_warp,
-                           request.foot_cleanup, clip)  # fmt: skip
+                           request.foot_cleanup, clip, loop=clip.loop is not None)  # fmt: skip
 
     def _style_input(self, style: StyleSource, timer: StageTimer) -> StyleInput:
         if style.kind == "style_name":
@@ -287,8 +290,8 @@ class TranslatorEngine(Engine):
         """The content's features, its own code (which tells its own speed), the restyler
         with the target code, the finish and the time warp (module docstring)."""
         style = self._style_code(job.style, timer)
-        content = job.content
         with timer.stage("features"):
+            content, cycle = wrapped(job.content, job.loop, self.window)
             enc = Fe.encode(content)
             control = Fe.restyler_input(enc.content, enc.style3d, self.stats)
             x_own, _ = self._padded(Fe.standardize(enc.style3d, self.stats, "style3d"))
@@ -300,6 +303,8 @@ class TranslatorEngine(Engine):
             output = self.restyled(control, played)
         motion = restyled_motion(output, content, enc, self.stats, timer, self.output_smoothing,
                                  job.strength, job.foot_cleanup)  # fmt: skip
+        with timer.stage("anatomy"):
+            motion = anatomical(motion, cycle)
         warnings = list(style.warnings)
         factor = 1.0
         if job.time_warp:
@@ -311,7 +316,8 @@ class TranslatorEngine(Engine):
                 factor, warned = self.warp_factor(
                     style.velocity, content_velocity, job.strength, speed
                 )
-                warnings += warned
+                factor, capped = speed_capped(factor, motion)
+                warnings += warned + capped
                 if factor != 1.0:
                     motion = Fe.time_warp(motion, factor)
         return Transfer(motion, factor, warnings)

@@ -65,13 +65,17 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
     ``model/gltf-binary`` one or FBX as an ``application/octet-stream`` one, with ``X-Model-Version``, ``X-Frames``, ``X-Fps`` and
     ``Server-Timing`` (``X-Request-Id`` is the middleware's); or for ``json`` the object
     ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings", "source_format"}`` (and
-    ``rig``; same headers)."""
+    ``rig``, and ``loop``: whether the clip was taken as a loop; same headers). A clip's
+    answer says ``X-Loop`` too."""
     name, version = result.model
     headers = {
         **timing_headers(result),
         "X-Frames": str(result.frames),
         "X-Fps": f"{result.fps:g}",
     }
+    loop = getattr(result, "loop", None)
+    if loop is not None:
+        headers["X-Loop"] = "true" if loop else "false"
     if result.format == "json":
         body = {
             "bvh": result.bvh,
@@ -84,6 +88,8 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
         }
         if result.rig is not None:
             body["rig"] = result.rig
+        if loop is not None:
+            body["loop"] = loop
         return JSONResponse(body, headers=headers)
     if result.format in FILE_FORMATS:
         filename = _filename(upload_name, result.suffix, result.format)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Request, Response, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Request, Response, UploadFile
 
 from motion import dance_features as DF
 from service.deps import DataPlaneDep, SettingsDep
@@ -13,6 +13,7 @@ from service.errors import InvalidRequest
 from service.requests import DanceRequest
 from service.routes import answers
 from service.routes.fields import FormatQuery, MappingField, parse_mapping, text_upload, upload
+from service.routes.known_fields import only_known_fields
 
 router = APIRouter(tags=["dance"])
 
@@ -34,6 +35,7 @@ def check_genre(genre: str | None) -> str | None:
 
 @router.post(
     "/v1/dance",
+    dependencies=[Depends(only_known_fields)],
     summary="Generate a dance for a whole song (BVH as long as the decoded audio)",
     response_class=Response,
     responses=answers.clip_responses(

@@ -12,7 +12,7 @@ from typing import Annotated
 
 from fastapi import Depends, File, Form, Query, UploadFile
 
-from service.clips import Format, Upload
+from service.clips import Format, GameOptions, LoopMode, RootMotion, Upload
 from service.config import Settings
 from service.deps import SettingsDep
 from service.errors import InvalidRequest, PayloadTooLarge, UnsupportedMediaType
@@ -137,6 +137,7 @@ class ContentFields:
     foot_cleanup: bool
     mapping: dict[str, str] | None
     format: str | None
+    game: GameOptions
 
     @property
     def filename(self) -> str | None:
@@ -156,11 +157,30 @@ async def read_content_fields(
     foot_cleanup: Annotated[bool, Form(description="pin the content's foot contacts")] = True,
     mapping: MappingField = None,
     format: FormatQuery = None,  # noqa: A002
+    loop: Annotated[
+        LoopMode,
+        Form(
+            description="auto: a clip whose last pose meets its first (root travel aside) "
+            "comes back looping; true: take it as a loop; false: never"
+        ),
+    ] = "auto",
+    root_motion: Annotated[
+        RootMotion,
+        Form(
+            description="keep the root's travel, or in_place: the hips held over one spot "
+            "on the floor (vertical bob and facing kept)"
+        ),
+    ] = "keep",
 ) -> ContentFields:
     """The content fields as one dependency: the routes that re-style a clip declare them
     once."""
     return ContentFields(
-        upload(content, settings), time_warp, foot_cleanup, parse_mapping(mapping), format
+        upload(content, settings),
+        time_warp,
+        foot_cleanup,
+        parse_mapping(mapping),
+        format,
+        GameOptions(loop, root_motion),
     )
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Form, Path, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Path, Request, UploadFile
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict
 
@@ -19,6 +19,7 @@ from service.registered_styles import NAME_RULE, check_name
 from service.requests import RegisterStyleRequest, Registration
 from service.routes import answers
 from service.routes.fields import MappingField, parse_mapping, upload
+from service.routes.known_fields import only_known_fields
 
 router = APIRouter(tags=["styles"])
 
@@ -82,6 +83,7 @@ def check_clip_count(count: int, settings: Settings) -> None:
 
 @router.post(
     "/v1/styles",
+    dependencies=[Depends(only_known_fields)],
     summary="Register a translator style from your own clips (BVH or GLB)",
     status_code=201,
     response_model=RegisteredStyleInfo,

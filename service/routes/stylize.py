@@ -4,18 +4,20 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Form, Request, Response
+from fastapi import APIRouter, Depends, Form, Request, Response
 
 from service.deps import DataPlaneDep
 from service.requests import StylizeRequest
 from service.routes import answers
 from service.routes.fields import ContentDep
+from service.routes.known_fields import only_known_fields
 
 router = APIRouter(tags=["stylize"])
 
 
 @router.post(
     "/v1/stylize",
+    dependencies=[Depends(only_known_fields)],
     summary="Re-style a clip (BVH or GLB) with one named style (fast feed-forward networks)",
     response_class=Response,
     responses=answers.clip_responses("the content's format (or ?format=) on its skeleton and rate"),
@@ -33,6 +35,7 @@ async def stylize_clip(
         time_warp=clip.time_warp,
         mapping=clip.mapping,
         format=clip.format,
+        game=clip.game,
     )
     result = await plane.infer("fast", job, endpoint=answers.route_template(request))
     return answers.respond(result, upload_name=clip.filename)

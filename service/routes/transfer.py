@@ -32,6 +32,7 @@ from service.errors import InvalidRequest, problem_responses
 from service.requests import StyleCodeRequest, StyleCodeResult, StyleSource, TransferRequest
 from service.routes import answers
 from service.routes.fields import ContentDep, parse_mapping, parse_mix, upload
+from service.routes.known_fields import only_known_fields
 
 router = APIRouter(tags=["transfer"])
 
@@ -120,6 +121,7 @@ def style_source(given: StyleFields, settings: Settings) -> StyleSource:
 
 @router.post(
     "/v1/transfer",
+    dependencies=[Depends(only_known_fields)],
     summary="Re-style a clip (BVH or GLB) by an example clip, a video's keypoints, a name or a mix",
     response_class=Response,
     responses=answers.clip_responses("the content's format (or ?format=) on its skeleton and rate"),
@@ -140,6 +142,7 @@ async def transfer(
         foot_cleanup=clip.foot_cleanup,
         mapping=clip.mapping,
         format=clip.format,
+        game=clip.game,
     )
     endpoint = answers.route_template(request)
     result = await plane.infer("translator", job, endpoint=endpoint)
@@ -148,6 +151,7 @@ async def transfer(
 
 @router.post(
     "/v1/style-code",
+    dependencies=[Depends(only_known_fields)],
     summary="The translator's style code of a style input, and the nearest named styles",
     responses=problem_responses(400, 404, 413, 415, 422, 503, 504),
 )

@@ -91,7 +91,8 @@ def test_json_format_and_no_cleanup(shared_client, walk):
     response = post(shared_client, walk, STYLES[-1], query="?format=json", foot_cleanup="false")
     assert response.status_code == 200, response.text
     body = response.json()
-    keys = {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig", "source_format"}
+    keys = {"bvh", "frames", "fps", "model", "timings_ms", "warnings", "rig", "source_format",
+            "loop"}  # fmt: skip
     assert set(body) == keys
     assert body["source_format"] == "bvh"
     assert body["rig"]["method"] == "names" and 0 < body["rig"]["confidence"] <= 1

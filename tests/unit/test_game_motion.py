@@ -164,3 +164,29 @@ def test_in_place_removes_travel_and_keeps_bob_and_facing(upright):
     assert np.ptp(after[:, [0, 2]], axis=0).max() < 1e-9 * rig.height
     assert np.allclose(after[:, 1], before[:, 1])
     assert np.allclose(still.lrot, motion.lrot)
+
+
+def test_a_stretch_taken_as_a_loop_runs_on_into_its_first_frame():
+    take = canonical(rigs.load_fixture().slice(0, 90))
+    loop = loops.detect(take, force=True)
+    assert loop is not None and loop.gap > loops.OPEN_GAP  # its ends do not meet
+    cycle = loops.closed(take, loop)
+    local = loops.local_poses(cycle)
+    steps = np.linalg.norm(np.diff(local, axis=0), axis=-1).mean(axis=-1)
+    assert steps[-1] < 1.25 * steps[-2]  # into the closing frame as its last step went
+    jump, _ = loops.loop_jump(cycle)
+    assert jump < 1e-9 * H
+    assert (
+        np.abs(K.global_positions(cycle.slice(0, 1)) - K.global_positions(take.slice(0, 1))).max()
+        < 1e-9
+    )
+
+
+def test_any_rig_gains_its_first_frame_one_step_on():
+    walk = rigs.z_up(rigs.load_fixture().slice(0, 30))
+    rig = retarget.make_rig(walk.skeleton, walk)
+    longer = loops.with_closing_frame(walk, rig.up)
+    assert longer.num_frames == 31 and np.allclose(longer.lrot[-1], walk.lrot[0])
+    root = R.apply(rig.up, longer.lpos[:, 0])
+    assert np.allclose(root[-1, [0, 2]], 2 * root[-2, [0, 2]] - root[-3, [0, 2]])
+    assert root[-1, 1] == pytest.approx(root[0, 1])
