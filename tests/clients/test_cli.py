@@ -92,6 +92,37 @@ def test_stylize_and_dance_write_beside_each_name(server, mixed_rigs, tmp_path):
         assert dance.skeleton.names == bvh.load(rig).skeleton.names
 
 
+def test_game_options_and_every_kind_of_style(server, tmp_path):
+    """--keep-timing, --root-motion, --loop reach the service (no time warp, the hips held
+    in place, the clip taken as a loop), and a style comes by --mix or --style-clip too."""
+    from motion import kinematics as K
+    from motion import retarget
+    from tests.rigs import walk_cycle
+
+    clip = tmp_path / "cycle.bvh"
+    cycle = walk_cycle()
+    bvh.save(cycle, clip)
+    style_clip = tmp_path / "style.bvh"
+    bvh.save(load_fixture().slice(0, 60), style_clip)
+    rig = retarget.make_rig(cycle.skeleton, cycle)
+    hips = rig.mapping["Hips"]
+    for family, style in (("transfer", ["--mix", '{"happy": 0.5, "proud": 0.5}']),
+                          ("transfer", ["--style-clip", str(style_clip)]),
+                          ("stylize", ["--style", "active"])):  # fmt: skip
+        out = tmp_path / f"{family}-{style[0][2:]}"
+        result = motion_style(family, str(clip), *style, "--keep-timing", "--root-motion",
+                              "in_place", "--loop", "true", "--url", server.url, "-o", str(out),
+                              "-q")  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        answer = bvh.load(out / "cycle.bvh")
+        assert answer.num_frames == cycle.num_frames  # kept its timing
+        travel = np.ptp(K.global_positions(answer)[:, hips, [0, 2]], axis=0).max()
+        assert travel < 0.02 * rig.height  # in place
+    result = motion_style("transfer", str(clip), "--style", "happy", "--mix", "{}",
+                          "--url", server.url, "-o", str(tmp_path / "x"))  # fmt: skip
+    assert result.returncode == 2 and "not allowed with" in result.stderr
+
+
 class SheddingProxy:
     """Forwards to the service, but answers 503 with Retry-After to the first ``shed``
     requests of every path it has not seen ``shed`` times (``shed=None``: every request)."""
