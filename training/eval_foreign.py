@@ -33,7 +33,10 @@ spread: the same between per-style mean descriptors of real Bandai takes of one 
 (one dataset, one content label), averaged over actions. Content kept: hands and feet
 relative to the hips in the body's facing frame, the output resampled to the content's
 frame count (time warping changes it), centred 3D correlation per effector, averaged; the
-mean and the share at or above 0.85. Foot sliding as ``judges.skating``, beside real
+mean and the share at or above 0.85. Anatomy (``foreign_measures.Limbs``): the share of
+frames with a knee more than 2% of body height behind its hip-ankle line, the leg bent
+(over all outputs, and the worst output's), and the fastest joint in body heights a
+second, beside the content's and real Bandai's own. Foot sliding as ``judges.skating``, beside real
 Bandai mocap and the content unchanged. Jitter, for the families with networks of their
 own (:func:`held_out_jitter`): their output's jerk against real mocap of the same timing,
 on Bandai's held-out takes. Baseline: what the judge says of the content
@@ -69,7 +72,15 @@ from training.foreign_judge import (
     reference,
     share,
 )
-from training.foreign_measures import KEPT, RealBandai, content_kept, real_bandai, style_spread
+from training.foreign_measures import (
+    KEPT,
+    Limbs,
+    RealBandai,
+    content_kept,
+    limb_figures,
+    real_bandai,
+    style_spread,
+)
 from training.foreign_report import markdown
 from training.judges import (
     held_out_jitter,
@@ -215,6 +226,7 @@ class Output:
     descriptor: np.ndarray
     kept: float
     sliding: float
+    limbs: Limbs
 
     @property
     def style(self) -> str:
@@ -249,6 +261,7 @@ def send(
                     real.standardised(out),
                     content_kept(out, item.motion),
                     skating(out),
+                    Limbs.of(out),
                 )
             )
         if (i + 1) % 10 == 0 or i + 1 == len(items):
@@ -306,6 +319,7 @@ def family_figures(outputs: list[Output], classes: list[str], real: RealBandai) 
         content_kept=round(float(np.mean(kept)), 4),
         content_kept_share=share([k >= KEPT for k in kept]),
         foot_sliding_cm_s=round(float(np.mean([o.sliding for o in outputs])), 2),
+        anatomy=limb_figures([o.limbs for o in outputs]),
         outputs=[
             [o.item.name, o.name, p, round(o.kept, 3)]
             for o, p in zip(outputs, predicted, strict=True)
@@ -331,6 +345,7 @@ def unchanged_figures(items: list[Item], judge: StyleJudge) -> dict:
         "foot_sliding_by_source": {
             s: round(float(np.mean(v)), 2) for s, v in sorted(by_source.items())
         },
+        "anatomy": limb_figures([Limbs.of(i.motion) for i in items]),
     }
 
 
@@ -411,6 +426,7 @@ def evaluate(
                 "spread": round(real.spread, 4),
                 "spread_by_dataset": real.spread_by_dataset,
                 "foot_sliding_cm_s": round(real.sliding, 2),
+                "anatomy": real.anatomy,
             },
             "machine": measuring_machine(),
             "measured": time.strftime("%Y-%m-%d"),

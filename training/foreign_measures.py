@@ -1,6 +1,6 @@
 """What the foreign evaluation (``training.eval_foreign``) measures without a classifier: how
-much of the content an output keeps and how far apart the styles of one item lie, against
-real Bandai mocap."""
+much of the content an output keeps, how far apart the styles of one item lie, and whether
+its limbs move as a body can (:class:`Limbs`), against real Bandai mocap."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from motion import anatomy
 from motion import canonical as C
 from motion import features as Fe
 from motion import kinematics as K
@@ -72,16 +73,45 @@ def style_spread(descriptors: np.ndarray, styles: list[str]) -> float:
     return mean_pairwise_distance(np.array(means))
 
 
+@dataclass(frozen=True)
+class Limbs:
+    """What the anatomy figures need of a clip (:mod:`motion.anatomy`): its frames, those
+    with a knee bent backwards, and its fastest joint (body heights a second)."""
+
+    frames: int
+    backwards: int
+    peak_speed: float
+
+    @staticmethod
+    def of(motion: Motion) -> Limbs:
+        backwards = int(anatomy.knees_backwards(motion).sum())
+        return Limbs(motion.num_frames, backwards, anatomy.peak_speed(motion))
+
+
+def limb_figures(limbs: list[Limbs]) -> dict:
+    """Knees bent backwards (share of all frames, the worst clip's share) and the fastest
+    joint (the fastest clip's, and the 99th percentile of the clips' fastest)."""
+    frames = sum(x.frames for x in limbs)
+    return {
+        "knees_backwards": round(sum(x.backwards for x in limbs) / max(frames, 1), 5),
+        "knees_backwards_worst_clip": round(max(x.backwards / x.frames for x in limbs), 4),
+        "peak_speed_bh_s": round(max(x.peak_speed for x in limbs), 2),
+        "peak_speed_p99_bh_s": round(float(np.percentile([x.peak_speed for x in limbs], 99)), 2),
+    }
+
+
 @dataclass
 class RealBandai:
     """What the spread and the foot sliding compare with: the descriptors' standardisation,
-    the real spread (overall and per dataset) and real mocap's foot sliding."""
+    the real spread (overall and per dataset), real mocap's foot sliding and its limbs'
+    figures (:func:`limb_figures`)."""
 
     mean: np.ndarray
     std: np.ndarray
     spread: float
     spread_by_dataset: dict[str, float]
     sliding: float
+    anatomy: dict
 
     def standardised(self, motion: Motion) -> np.ndarray:
         return (descriptor(motion) - self.mean) / self.std
@@ -106,4 +136,5 @@ def real_bandai(clips: list) -> RealBandai:
         float(np.mean(every)),
         {d: round(float(np.mean(v)), 4) for d, v in spreads.items()},
         float(np.mean([skating(c.motion) for c in clips])),
+        limb_figures([Limbs.of(c.motion) for c in clips]),
     )

@@ -71,6 +71,27 @@ def markdown(report: dict) -> str:
         f"{real['foot_sliding_cm_s']:.1f} (all takes)",
     )
     row(
+        "knees bent backwards: share of frames; worst clip's",
+        lambda v: (
+            f"{v['anatomy']['knees_backwards']:.2%}; "
+            f"{v['anatomy']['knees_backwards_worst_clip']:.1%}"
+        ),
+        f"{unchanged['anatomy']['knees_backwards']:.2%}; "
+        f"{unchanged['anatomy']['knees_backwards_worst_clip']:.1%}",
+        f"{real['anatomy']['knees_backwards']:.3%}; "
+        f"{real['anatomy']['knees_backwards_worst_clip']:.1%} (all takes)",
+    )
+    row(
+        "fastest joint, body heights/s: fastest clip; 99th percentile of clips",
+        lambda v: (
+            f"{v['anatomy']['peak_speed_bh_s']:.1f}; {v['anatomy']['peak_speed_p99_bh_s']:.1f}"
+        ),
+        f"{unchanged['anatomy']['peak_speed_bh_s']:.1f}; "
+        f"{unchanged['anatomy']['peak_speed_p99_bh_s']:.1f}",
+        f"{real['anatomy']['peak_speed_bh_s']:.1f}; {real['anatomy']['peak_speed_p99_bh_s']:.1f}"
+        " (all takes)",
+    )
+    row(
         "jerk against real mocap, Bandai's held-out takes in their own style",
         lambda v: f"{v['held_out_jitter']['ratio']:.2f}" if v.get("held_out_jitter") else "-",
         "-",

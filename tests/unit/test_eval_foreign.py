@@ -270,12 +270,17 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         assert 0.0 <= figures["top1"] <= figures["top3"] <= 1.0
         assert figures["spread_ratio"] > 0.0 and -1.0 <= figures["content_kept"] <= 1.0
         assert sum(b["n"] for b in figures["by_source"].values()) == len(names)
+        limbs = figures["anatomy"]
+        assert 0.0 <= limbs["knees_backwards"] <= limbs["knees_backwards_worst_clip"] <= 1.0
+        assert 0.0 < limbs["peak_speed_p99_bh_s"] <= limbs["peak_speed_bh_s"]
         jitter = figures["held_out_jitter"]
         if family in EF.ADAPTERS:  # the families with networks of their own
             assert jitter["takes"] == 29 and jitter["real_m_s3"] > 0.0
             assert 0.3 < jitter["ratio"] < 3.0  # neither frozen nor shaking
         else:
             assert jitter is None
+    real = report["real_bandai"]["anatomy"]  # 3 frames of 76,197 (a dance); a sprint's 6.8
+    assert real["knees_backwards"] < 1e-4 and 6.0 < real["peak_speed_bh_s"] < 8.0
     reference = report["real_bandai"]["leave_action_out"]
     assert reference["n"] == 454
     clips = [g["n"] for g in reference["within_actor_groups"].values()]
