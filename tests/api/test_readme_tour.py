@@ -62,6 +62,7 @@ def test_the_readme_tour_works_as_written(tmp_path):
     assert '"name":"our-walk"' in out  # registered
     assert "\n204\n" in out  # and deleted
     assert '"status":400' in out and "not a BVH file" in out  # the README is no BVH
+    assert "unknown field 'root_motoin'" in out  # a misspelt field is named
     written = re.findall(r"-o (\S+\.bvh)", commands)
     assert len(written) >= 7
     for name in written:
