@@ -33,8 +33,8 @@ a beat). Parts:
 - **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
   foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
   of the real held-out dances;
-- **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++ kinetic and geometric
-  feature distances of the dances generated for the held-out songs to their real dances,
+- **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++
+  kinetic and geometric feature distances of the dances generated for the held-out songs to their real dances,
   beside the real dances of the genre's other songs to the same, per genre, and diversity;
   the first half of each held-out song is the development half, the second the test half.
 
