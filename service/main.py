@@ -49,7 +49,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     app.state.registry.start()
     if settings.fbx_workers and fbx.installed():  # warm Blender before the first FBX
         threading.Thread(
-            target=fbx.start, args=(settings.fbx_workers,), name="blender-start", daemon=True
+            target=_start_blender,
+            args=(app.state.registry, settings.fbx_workers),
+            name="blender-start",
+            daemon=True,
         ).start()
     try:
         yield
@@ -58,6 +61,13 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.registry.close()
         auth.close(app)
         metrics.mark_worker_dead()
+
+
+def _start_blender(registry: ModelRegistry, workers: int) -> None:
+    """The FBX pool's Blender processes, once the models have loaded: readiness never waits
+    for them, nor do they take the CPU the models' loading needs."""
+    registry.wait()
+    fbx.start(workers)
 
 
 def create_app(
