@@ -1,8 +1,8 @@
-# syntax=docker/dockerfile:1
 # The service image: Python 3.11 slim, only the `serve` extra (onnxruntime; no torch, no
 # training or test tools), the shipped models/ baked in, a non-root user.
 #
 #   docker build -t motion-style .
+#   make image      # the same, on a base built from Debian's packages where no registry answers
 #   docker run -p 8000:8000 -e MOTION_WORKERS=2 -e MOTION_INTRA_OP_THREADS=1 motion-style
 #   docker run -p 8000:8000 -v "$PWD/keys:/keys:ro" -e MOTION_API_KEYS_FILE=/keys/api-keys \
 #     motion-style      # API keys (docs/api-keys.md): mount the folder, not the file
@@ -21,6 +21,11 @@ RUN python /tmp/build/serve_requirements.py /tmp/build/pyproject.toml > /tmp/bui
  && /opt/venv/bin/pip install --require-virtualenv -r /tmp/build/requirements.txt \
  && /opt/venv/bin/python -c "import fastapi, onnxruntime, soundfile, soxr, uvicorn" \
  && if /opt/venv/bin/python -c "import torch" 2>/dev/null; then echo "torch in the image" >&2; exit 1; fi
+# What serving never runs: pip and setuptools, and the packages' own test suites (numpy,
+# scipy, numba: 66 MB). See docs/deploy.md for the image's size.
+RUN /opt/venv/bin/python -m pip uninstall -y -q pip setuptools \
+ && find /opt/venv/lib -type d -name tests -prune -exec rm -rf {} + \
+ && /opt/venv/bin/python -c "import fastapi, numba, onnxruntime, scipy.ndimage, scipy.signal, soundfile"
 
 FROM ${PYTHON_IMAGE} AS runtime
 # The motion core's loops are compiled when the service starts (a few seconds) and kept in

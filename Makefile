@@ -41,6 +41,19 @@ test: $(VENV)/.dev
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
 
+# The image we ship is the image we test. `make image` builds motion-style:latest (and, where
+# no registry answers, its base from Debian's packages, plus nginx and Prometheus for compose;
+# deploy/image/build.sh). `make image-test` (CI runs it after `make test`) first installs
+# docker.io, docker-compose and debootstrap with apt and starts dockerd where they are
+# missing, then drives the container and the compose stack over HTTP (tests/image).
+.PHONY: image image-test
+image:
+	deploy/image/build.sh
+
+image-test: $(VENV)/.dev
+	deploy/image/ensure-docker.sh
+	base=$$(deploy/image/build.sh) && MOTION_IMAGE_BASE=$$base $(PY) -m pytest tests/image -v
+
 # Loopback load test of a fresh `python -m service`: 16 clients x 60 s on the GET endpoints,
 # errors, p50/p95/p99 and RSS (the 8 x 5 s version runs in `make test`). LOAD_ARGS adds flags.
 LOAD_ARGS ?=

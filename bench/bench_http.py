@@ -4,6 +4,7 @@ and 8 concurrent clients for the 960-frame case.
 
     python -m bench.bench_http [--repeats 10] [--json]
     python -m bench.bench_http --repeats 1 --lengths 240 --clients 1 2 --families fast
+    python -m bench.bench_http --url http://127.0.0.1:8000   # a running server, e.g. a container
 
 Starts ``python -m service`` on a free loopback port (``bench.load``'s helpers; the
 ``MOTION_*`` environment passes on to it, so ``MOTION_INTRA_OP_THREADS`` sets its threads)
@@ -338,6 +339,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--throughput-frames", type=int, default=THROUGHPUT_FRAMES)
     p.add_argument("--families", nargs="+", default=list(FAMILIES), choices=FAMILIES)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--url", help="a running server (loopback only: a container's published port)")
     args = p.parse_args(argv)
     if args.repeats < 1 or any(n < 2 for n in args.lengths) or any(c < 1 for c in args.clients):
         p.error("--repeats and --clients must be >= 1, --lengths >= 2")
@@ -355,7 +357,7 @@ def main(argv: list[str] | None = None) -> dict:
             skipped[family] = f"no {family} model in {settings.models_dir}/manifest.json"
             print(f"{family}: skipped, {skipped[family]}", file=note)
 
-    process, url = _start_server(1)
+    process, url = (None, args.url) if args.url else _start_server(1)
     try:
         parts = urlsplit(url)
         host, port = parts.hostname or "127.0.0.1", parts.port or 80
@@ -395,14 +397,15 @@ def main(argv: list[str] | None = None) -> dict:
                 row, errs = throughput(host, port, case, clients, total)
                 tp_rows.append(row)
                 errors += errs
-        server_rss = rss_mb(process.pid)
+        server_rss = rss_mb(process.pid) if process else float("nan")
     finally:
-        process.terminate()
-        try:
-            process.wait(30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(10)
+        if process:
+            process.terminate()
+            try:
+                process.wait(30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(10)
 
     report = {
         "url": url,
