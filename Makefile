@@ -52,7 +52,7 @@ image:
 
 image-test: $(VENV)/.dev
 	deploy/image/ensure-docker.sh
-	base=$$(deploy/image/build.sh) && MOTION_IMAGE_BASE=$$base $(PY) -m pytest tests/image -v
+	base=$$(deploy/image/build.sh) && MOTION_IMAGE_BASE=$$base $(PY) -m pytest tests/image -v --durations=5
 
 # Loopback load test of a fresh `python -m service`: 16 clients x 60 s on the GET endpoints,
 # errors, p50/p95/p99 and RSS (the 8 x 5 s version runs in `make test`). LOAD_ARGS adds flags.

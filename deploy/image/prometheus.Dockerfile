@@ -6,8 +6,8 @@ FROM ${BASE_IMAGE}
 RUN apt-get update \
  && apt-get install -y --no-install-recommends prometheus \
  && apt-get clean && rm -rf /var/lib/apt/lists/* \
- && mkdir -p /prometheus && chown nobody:nogroup /prometheus
-USER nobody
+ && mkdir -p /prometheus && chown prometheus:prometheus /prometheus
+USER prometheus
 WORKDIR /prometheus
 EXPOSE 9090
 ENTRYPOINT ["/usr/bin/prometheus"]

@@ -1,9 +1,10 @@
 """The deployment files agree with each other and with the app: Dockerfile, .dockerignore,
 docker-compose.yml, deploy/nginx.conf, deploy/prometheus.yml, deploy/k8s/*.yaml.
 
-There is no Docker engine here, so the image's command is run as it stands against the
-repository (the port swapped for a free one), and nginx checks and serves its config when
-it is installed (``apt-get install nginx``; those tests skip otherwise).
+Here the image's command is run as it stands against the repository (the port swapped for a
+free one), and nginx checks and serves its config when it is installed (``apt-get install
+nginx``; those tests skip otherwise). The built image and the compose stack themselves run in
+Docker under ``make image-test`` (tests/image).
 """
 
 from __future__ import annotations
@@ -215,7 +216,10 @@ def test_compose_runs_replicas_behind_nginx_with_optional_prometheus():
     compose = yaml.safe_load(COMPOSE.read_text())
     services = compose["services"]
     api, nginx, prometheus = services["api"], services["nginx"], services["prometheus"]
-    assert api["build"] == "."
+    assert api["build"]["context"] == "."
+    base_arg = next(a for k, a in dockerfile_instructions() if k == "ARG").split("=")
+    # the base is the one difference `make image` makes where no registry answers
+    assert api["build"]["args"] == {base_arg[0]: f"${{{base_arg[0]}:-{base_arg[1]}}}"}
     assert str(APP_PORT) in [str(p) for p in api["expose"]]
     assert "ports" not in api, "replicas are reached through nginx only"
     replicas = str(api["deploy"]["replicas"])
@@ -237,6 +241,21 @@ def test_compose_runs_replicas_behind_nginx_with_optional_prometheus():
     assert mounts["/etc/prometheus/prometheus.yml"] == "./deploy/prometheus.yml"
     for source in (COMPOSE.parent / "deploy" / "nginx.conf", PROMETHEUS):
         assert source.is_file()
+
+
+def test_the_debian_override_builds_nginx_and_prometheus_on_the_debian_base():
+    """deploy/compose.debian.yml (no registry): the same services, each built from a
+    Dockerfile on the base that `make image` made, under the name deploy/image/build.sh tags."""
+    main = yaml.safe_load(COMPOSE.read_text())["services"]
+    override = yaml.safe_load((REPO / "deploy" / "compose.debian.yml").read_text())["services"]
+    assert set(override) == {"nginx", "prometheus"} <= set(main)
+    build_script = (REPO / "deploy" / "image" / "build.sh").read_text()
+    assert "for service in nginx prometheus; do" in build_script
+    for name, service in override.items():
+        assert service["image"] == f"motion-style-{name}:debian"
+        build = service["build"]
+        assert (REPO / build["context"] / build["dockerfile"]).is_file()
+        assert build["args"]["BASE_IMAGE"].startswith("${PYTHON_IMAGE")
 
 
 def test_nginx_proxies_to_the_api_service_within_the_app_limits():

@@ -70,10 +70,23 @@ class Stack:
         return sorted(docker("ps", "-q", "--no-trunc", "--filter", labels[0], "--filter",
                              labels[1]).stdout.split())  # fmt: skip
 
-    def replica_metrics(self, container: str) -> str:
+    def replica_get(self, container: str, path: str, check: bool = True) -> str:
+        """GET ``path`` from one replica itself (inside its container), not through nginx."""
         script = "import urllib.request; print(urllib.request.urlopen(" \
-                 "'http://127.0.0.1:8000/metrics', timeout=10).read().decode())"  # fmt: skip
-        return docker("exec", container, "python", "-c", script).stdout
+                 f"'http://127.0.0.1:8000{path}', timeout=10).read().decode())"  # fmt: skip
+        return docker("exec", container, "python", "-c", script, check=check).stdout
+
+    def replica_metrics(self, container: str) -> str:
+        return self.replica_get(container, "/metrics")
+
+    def wait_every_replica_ready(self, timeout: float = 240) -> None:
+        """Healthy (the HEALTHCHECK: /healthz, alive) comes before ready (/readyz: models
+        warmed); until then nginx passes a replica's 503 on to the other one."""
+        deadline = time.monotonic() + timeout
+        for container in self.replicas():
+            while self.replica_get(container, "/readyz", check=False) == "":
+                assert time.monotonic() < deadline, f"{container} not ready"
+                time.sleep(1)
 
 
 @pytest.fixture(scope="module")
@@ -82,6 +95,7 @@ def stack():
     try:
         stack.run("up", "-d", "--no-build", timeout=600)
         wait_ready(stack.url, timeout=240)
+        stack.wait_every_replica_ready()
         yield stack
     except BaseException:
         print(stack.run("logs", "--tail", "40", timeout=60))
