@@ -165,6 +165,17 @@ def test_a_glb_comes_back_as_a_glb_with_its_new_animation(client, styles):
     assert len(after.animations) == 1 and r.content != sent
 
 
+def test_an_fbx_is_refused_saying_how_to_enable_it_when_the_image_lacks_the_extra(client):
+    if docker("run", "--rm", IMAGE, "python", "-c", "import bpy", check=False).returncode == 0:
+        pytest.skip("the image has the fbx extra: an FBX round trip belongs here")
+    data = b"Kaydara FBX Binary  \x00\x1a\x00" + b"\x00" * 100
+    r = client.post("/v1/stylize", files={"content": ("walk.fbx", data, "application/octet-stream")},
+                    data={"style_name": "angry"})  # fmt: skip
+    assert r.status_code == 415, r.text[:500]
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert "fbx extra" in r.json()["detail"]
+
+
 def test_an_mp3_song_becomes_a_dance_as_long_as_the_song(client):
     data = encoded(song(12.0, bpm=120.0, seed=1), "MP3")
     samples, sr = audio.decode(data)
