@@ -16,7 +16,7 @@ import numpy as np
 import pygltflib
 import pytest
 
-from motion import audio, bvh
+from motion import audio_decode, bvh
 from tests.gltf_files import character_glb
 from tests.image.containers import (
     IMAGE,
@@ -50,6 +50,21 @@ def volume():
 
 @pytest.fixture(scope="module")
 def container(volume):
+    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"})
+    try:
+        wait_ready(box.url)
+        yield box
+    except BaseException:
+        print(box.logs())
+        raise
+    finally:
+        box.remove()
+
+
+@pytest.fixture(scope="module")
+def replacement(volume):
+    """A second container on the same volume, started when a test first asks for it (after
+    the first is removed); the shutdown test ends it."""
     box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"})
     try:
         wait_ready(box.url)
@@ -178,7 +193,7 @@ def test_an_fbx_is_refused_saying_how_to_enable_it_when_the_image_lacks_the_extr
 
 def test_an_mp3_song_becomes_a_dance_as_long_as_the_song(client):
     data = encoded(song(12.0, bpm=120.0, seed=1), "MP3")
-    samples, sr = audio.decode(data)
+    samples, sr = audio_decode.decode(data)
     r = client.post("/v1/dance", files={"audio": ("song.mp3", data, "audio/mpeg")},
                     data={"seed": "2"})  # fmt: skip
     assert r.status_code == 200, r.text[:500]
@@ -206,7 +221,7 @@ def transfer_with(client, style: str) -> np.ndarray:
 
 
 def test_a_registered_style_is_used_and_kept_when_the_container_is_replaced(
-    container, client, volume
+    container, client, request
 ):
     walk = bvh.load(FIXTURE)
     clips = [("clips", bvh_file()), ("clips", ("walk.glb", character_glb(walk), GLB))]
@@ -217,55 +232,47 @@ def test_a_registered_style_is_used_and_kept_when_the_container_is_replaced(
     restyled = transfer_with(client, STYLE)
 
     container.remove()  # the read-only container kept nothing: only the volume can
-    replacement = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"})
-    try:
-        wait_ready(replacement.url)
-        with httpx.Client(base_url=replacement.url, timeout=120) as again:
-            listed = {e["name"]: e for e in again.get("/v1/styles").json()["translator"]}
-            assert listed.get(STYLE, {}).get("registered") is True, listed.keys()
-            np.testing.assert_allclose(transfer_with(again, STYLE), restyled, atol=1e-3)
-            assert again.delete(f"/v1/styles/{STYLE}").status_code == 204
-            assert again.post("/v1/transfer", files={"content": bvh_file()},
-                              data={"style_name": STYLE}).status_code == 404  # fmt: skip
-    finally:
-        replacement.remove()
+    replacement = request.getfixturevalue("replacement")
+    with httpx.Client(base_url=replacement.url, timeout=120) as again:
+        listed = {e["name"]: e for e in again.get("/v1/styles").json()["translator"]}
+        assert listed.get(STYLE, {}).get("registered") is True, listed.keys()
+        np.testing.assert_allclose(transfer_with(again, STYLE), restyled, atol=1e-3)
+        assert again.delete(f"/v1/styles/{STYLE}").status_code == 204
+        assert again.post("/v1/transfer", files={"content": bvh_file()},
+                          data={"style_name": STYLE}).status_code == 404  # fmt: skip
 
 
 # --- shutdown ------------------------------------------------------------------------------------
 
 
-def test_sigterm_during_a_long_request_completes_it_and_exits_zero(volume):
-    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "1"})
-    try:
-        wait_ready(box.url)
-        data = encoded(song(180.0, bpm=110.0, seed=4), "MP3")
-        result: dict = {}
+def test_sigterm_during_a_long_request_completes_it_and_exits_zero(replacement):
+    box = replacement
+    data = encoded(song(180.0, bpm=110.0, seed=4), "MP3")
+    result: dict = {}
 
-        def long_request() -> None:
-            try:
-                result["response"] = httpx.post(
-                    box.url + "/v1/dance",
-                    files={"audio": ("song.mp3", data, "audio/mpeg")},
-                    data={"seed": "1"},
-                    timeout=120,
-                )
-            except httpx.HTTPError as exc:
-                result["error"] = exc
+    def long_request() -> None:
+        try:
+            result["response"] = httpx.post(
+                box.url + "/v1/dance",
+                files={"audio": ("song.mp3", data, "audio/mpeg")},
+                data={"seed": "1"},
+                timeout=120,
+            )
+        except httpx.HTTPError as exc:
+            result["error"] = exc
 
-        thread = threading.Thread(target=long_request)
-        thread.start()
-        deadline = time.monotonic() + 60
-        while gauge(httpx.get(box.url + "/metrics").text, "motion_inferences_in_flight") < 1:
-            assert time.monotonic() < deadline and thread.is_alive(), "never in flight"
-            time.sleep(0.05)
-        docker("kill", "--signal", "TERM", box.name)
-        assert thread.is_alive(), "the request ended before the signal: make it longer"
-        thread.join(120)
-        assert "error" not in result, f"{result.get('error')!r}\n{box.logs()}"
-        response = result["response"]
-        assert response.status_code == 200, response.text[:500]
-        assert bvh.loads(response.text).num_frames >= 180 * 30
-        exit_code = docker("wait", box.name, timeout=90).stdout.strip()
-        assert exit_code == "0", box.logs()
-    finally:
-        box.remove()
+    thread = threading.Thread(target=long_request)
+    thread.start()
+    deadline = time.monotonic() + 60
+    while gauge(httpx.get(box.url + "/metrics").text, "motion_inferences_in_flight") < 1:
+        assert time.monotonic() < deadline and thread.is_alive(), "never in flight"
+        time.sleep(0.05)
+    docker("kill", "--signal", "TERM", box.name)
+    assert thread.is_alive(), "the request ended before the signal: make it longer"
+    thread.join(120)
+    assert "error" not in result, f"{result.get('error')!r}\n{box.logs()}"
+    response = result["response"]
+    assert response.status_code == 200, response.text[:500]
+    assert bvh.loads(response.text).num_frames >= 180 * 30
+    exit_code = docker("wait", box.name, timeout=90).stdout.strip()
+    assert exit_code == "0", box.logs()
