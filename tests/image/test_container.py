@@ -31,7 +31,7 @@ from tests.image.containers import (
     wait_ready,
 )
 from tests.rigs import FIXTURE
-from tests.songs import encoded, song
+from training.songs import encoded, song
 
 pytestmark = needs_image
 
