@@ -40,7 +40,7 @@ class ServerProcess:
         port: int | None = None,
         log_path: Path | None = None,
         ready_path: str = "/readyz",
-        start_timeout: float = 60.0,
+        start_timeout: float = 180.0,
     ) -> None:
         self.port = port or free_port()
         default = [sys.executable, "-m", "service", "--host", "127.0.0.1", "--port", "{port}"]
