@@ -44,8 +44,8 @@ def local_poses(motion: Motion) -> np.ndarray:
     """Positions ``(F, 21, 3)`` of a canonical motion's joints from the hips down (not
     joint_Root, which stays at the origin) relative to the hips' place on the floor,
     turned so the hips' heading is +Z."""
-    gpos = K.global_positions(motion)
-    heading = R.yaw(K.global_rotations(motion)[:, HIPS])
+    grot, gpos = K.fk(motion.lrot, motion.lpos, motion.skeleton.parents)
+    heading = R.yaw(grot[:, HIPS])
     return K.root_local(gpos[:, HIPS:], gpos[:, HIPS], heading)
 
 

@@ -273,6 +273,8 @@ def bone_vectors(
         return offsets, moving
     lpos = motion.lpos[:, inner]
     tiny = 1e-6 * skeleton.height()
+    if np.abs(lpos - offsets[inner]).max() <= tiny / 2:  # the common case, in one pass
+        return offsets, moving
     moving[inner] = np.ptp(lpos, axis=0).max(axis=-1) > tiny
     median = np.median(lpos, axis=0)
     if not moving.any() and np.abs(median - offsets[inner]).max() <= tiny:
