@@ -12,6 +12,8 @@ import pytest
 
 from service.config import Settings
 from service.main import create_app
+from tests.api.translator_helpers import video_zip
+from tests.rigs import FIXTURE
 
 with warnings.catch_warnings():
     # Starlette asks for httpx2 (not installed); its TestClient still works with httpx.
@@ -57,3 +59,15 @@ def shared_client() -> Iterator[TestClient]:
     with TestClient(app) as client:
         assert app.state.registry.wait(120)
         yield client
+
+
+@pytest.fixture(scope="module")
+def walk() -> bytes:
+    """The CMU walk fixture's BVH bytes, the content most API tests send."""
+    return FIXTURE.read_bytes()
+
+
+@pytest.fixture(scope="module")
+def treadmill_zip() -> bytes:
+    """OpenPose keypoints of a real walk video ("teenage hooligan"), zipped."""
+    return video_zip(27)

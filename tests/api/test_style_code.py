@@ -7,7 +7,6 @@ import tarfile
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from service.engines.translator import (
     CODE_NORM_LIMIT,
@@ -19,17 +18,6 @@ from tests.api.translator_helpers import (
     video_zip,
 )
 from tests.conftest import data_path
-from tests.rigs import FIXTURE
-
-
-@pytest.fixture(scope="module")
-def walk() -> bytes:
-    return Path(FIXTURE).read_bytes()
-
-
-@pytest.fixture(scope="module")
-def treadmill_zip() -> bytes:
-    return video_zip(27)  # a walk ("teenage hooligan")
 
 
 @needs_model

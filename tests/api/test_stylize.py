@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ from service.config import Settings
 from service.engines.restyling import MAX_WARP, MIN_WARP
 from tests.api.helpers import assert_problem
 from tests.conftest import data_path
-from tests.rigs import FIXTURE
 
 
 def shipped_fast_styles() -> list[str]:
@@ -52,11 +50,6 @@ def assert_same_rig(result_text: str, source: bytes) -> None:
     assert b.num_frames == a.num_frames
     assert abs(b.fps - a.fps) < 1e-3
     assert np.all(np.isfinite(b.lrot)) and np.all(np.isfinite(b.lpos))
-
-
-@pytest.fixture(scope="module")
-def walk() -> bytes:
-    return Path(FIXTURE).read_bytes()
 
 
 def test_styles_are_listed(shared_client):

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,20 +27,8 @@ from tests.api.translator_helpers import (
     bandai,
     needs_model,
     transfer,
-    video_zip,
 )
 from tests.conftest import data_path
-from tests.rigs import FIXTURE
-
-
-@pytest.fixture(scope="module")
-def walk() -> bytes:
-    return Path(FIXTURE).read_bytes()
-
-
-@pytest.fixture(scope="module")
-def treadmill_zip() -> bytes:
-    return video_zip(27)  # a walk ("teenage hooligan")
 
 
 def assert_same_rig(result_text: str, source: bytes, frames: int | None = None):

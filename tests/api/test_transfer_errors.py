@@ -4,7 +4,6 @@ each is its problem document (400, 404, 413, 415, 422), never a 500."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
@@ -16,12 +15,6 @@ from tests.api.translator_helpers import (
     needs_model,
     transfer,
 )
-from tests.rigs import FIXTURE
-
-
-@pytest.fixture(scope="module")
-def walk() -> bytes:
-    return Path(FIXTURE).read_bytes()
 
 
 @needs_model

@@ -3,8 +3,6 @@ windows, padding and blending, the core's output, and how far out each code play
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -28,12 +26,6 @@ from tests.api.translator_helpers import (
     STYLES,
     needs_model,
 )
-from tests.rigs import FIXTURE
-
-
-@pytest.fixture(scope="module")
-def walk() -> bytes:
-    return Path(FIXTURE).read_bytes()
 
 
 def restyle(engine, content, style, **options):
