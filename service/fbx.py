@@ -106,13 +106,7 @@ class BlenderPool:
         """Start the workers (in parallel) and wait until each has loaded Blender."""
         workers = [_Worker() for _ in range(self.size)]
         for w in workers:
-            try:
-                w.wait_ready(START_TIMEOUT_S)
-            except (RuntimeError, EOFError, OSError) as exc:
-                logger.error("a Blender worker did not start: %s", exc)
-                w.close()
-                continue
-            self._give_back(w)
+            self._give_back_when_ready(w, "start")
 
     def close(self) -> None:
         with self._condition:
@@ -145,17 +139,21 @@ class BlenderPool:
         """Kill ``worker`` and start another in the background."""
         worker.close()
 
-        def respawn() -> None:
-            fresh = _Worker()
-            try:
-                fresh.wait_ready(START_TIMEOUT_S)
-            except (RuntimeError, EOFError, OSError) as exc:
-                logger.error("a Blender worker did not restart: %s", exc)
-                fresh.close()
-                return
-            self._give_back(fresh)
+        threading.Thread(
+            target=lambda: self._give_back_when_ready(_Worker(), "restart"),
+            name="blender-respawn",
+            daemon=True,
+        ).start()
 
-        threading.Thread(target=respawn, name="blender-respawn", daemon=True).start()
+    def _give_back_when_ready(self, worker: _Worker, what: str) -> None:
+        """Into the pool once Blender has loaded; closed, and logged, when it does not."""
+        try:
+            worker.wait_ready(START_TIMEOUT_S)
+        except (RuntimeError, EOFError, OSError) as exc:
+            logger.error("a Blender worker did not %s: %s", what, exc)
+            worker.close()
+            return
+        self._give_back(worker)
 
     def call(self, op: str, data: bytes, timeout: float, **kwargs):
         """``op`` of :mod:`service.fbx_worker` on the FBX file ``data``: its value, or the
