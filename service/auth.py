@@ -36,16 +36,10 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.api_keys import ApiKey, KeysFile
 from service.config import Settings
-from service.errors import (
-    Forbidden,
-    ServiceError,
-    TooManyRequests,
-    Unauthorized,
-    problem_responses,
-    service_error_response,
-)
+from service.errors import Forbidden, ServiceError, TooManyRequests, Unauthorized
 from service.key_limits import KeyLimits, Slot
 from service.log import key_name_var
+from service.problems import problem_responses, service_error_response
 
 logger = logging.getLogger(__name__)
 

@@ -13,11 +13,10 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from service import auth, fbx, metrics
+from service import auth, fbx, metrics, problems
 from service.config import Settings, available_cpus
 from service.dataplane import DataPlane
 from service.engines import EngineFactory, import_family_engines
-from service.errors import install_error_handlers
 from service.inference import InferenceRunner
 from service.middleware import RequestContextMiddleware, UploadLimitMiddleware
 from service.registered_styles import StyleStore
@@ -95,7 +94,7 @@ def create_app(
     )
     app.state.dataplane = DataPlane(app.state.registry, app.state.runner, registered)
 
-    install_error_handlers(app)
+    problems.install(app)
     # add_middleware puts each new one outside the previous: the request context is outermost,
     # and a request without a key is refused before the upload limit reads its body
     app.add_middleware(UploadLimitMiddleware, max_bytes=settings.max_upload_bytes)

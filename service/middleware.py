@@ -17,8 +17,9 @@ from starlette.routing import Mount, compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service import metrics
-from service.errors import PayloadTooLarge, internal_error_response, service_error_response
+from service.errors import PayloadTooLarge
 from service.log import request_id_var
+from service.problems import ReadRefused, internal_error_response, service_error_response
 
 logger = logging.getLogger("service.access")
 error_logger = logging.getLogger("service.errors")
@@ -157,8 +158,9 @@ class UploadLimitMiddleware:
 
     A declared ``Content-Length`` over the limit is answered at once, before routing and
     without reading the body. Otherwise (chunked uploads, or a client that lies) the bytes
-    are counted as the app reads them, and reading stops with :class:`PayloadTooLarge` the
-    moment the count passes the limit, so at most one chunk over the limit is ever held.
+    are counted as the app reads them, and reading stops with a :class:`PayloadTooLarge`
+    (carried by :class:`~service.problems.ReadRefused`) the moment the count passes the
+    limit, so at most one chunk over the limit is ever held.
     If the app swallows that error and answers something else, the 413 is sent instead.
     """
 
@@ -191,13 +193,13 @@ class UploadLimitMiddleware:
         async def limited_receive() -> Message:
             nonlocal received, exceeded
             if exceeded:
-                raise self._too_large()
+                raise ReadRefused(self._too_large())
             message = await receive()
             if message["type"] == "http.request":
                 received += len(message.get("body", b""))
                 if received > self.max_bytes:
                     exceeded = True
-                    raise self._too_large()
+                    raise ReadRefused(self._too_large())
             return message
 
         async def guarded_send(message: Message) -> None:

@@ -11,7 +11,7 @@ from fastapi import Request
 from fastapi.responses import JSONResponse, Response
 
 from service.clips import FILE_FORMATS, Result
-from service.errors import problem_responses
+from service.problems import problem_responses
 
 BVH_MEDIA_TYPE = "text/plain; charset=utf-8"
 GLB_MEDIA_TYPE = "model/gltf-binary"

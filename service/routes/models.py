@@ -8,8 +8,9 @@ from fastapi import APIRouter
 from pydantic import BaseModel
 
 from service.deps import RegistryDep
-from service.errors import NotReady, problem_responses
+from service.errors import NotReady
 from service.manifest import ModelEntry
+from service.problems import problem_responses
 
 router = APIRouter(tags=["models"])
 

@@ -14,7 +14,8 @@ from pydantic import BaseModel, ConfigDict
 from service import auth
 from service.config import Settings
 from service.deps import DataPlaneDep, RegistryDep, SettingsDep
-from service.errors import InvalidRequest, PayloadTooLarge, problem_responses
+from service.errors import InvalidRequest, PayloadTooLarge
+from service.problems import problem_responses
 from service.registered_styles import NAME_RULE, check_name
 from service.requests import RegisterStyleRequest, Registration
 from service.routes import answers

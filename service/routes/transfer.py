@@ -28,7 +28,8 @@ from fastapi.responses import JSONResponse
 
 from service.config import Settings
 from service.deps import DataPlaneDep, SettingsDep
-from service.errors import InvalidRequest, problem_responses
+from service.errors import InvalidRequest
+from service.problems import problem_responses
 from service.requests import StyleCodeRequest, StyleCodeResult, StyleSource, TransferRequest
 from service.routes import answers
 from service.routes.fields import ContentDep, parse_mapping, parse_mix, upload

@@ -44,3 +44,32 @@ def test_importing_motion_loads_no_torch():
     )
     r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+# The service's data plane and its engines; only service.main, service.problems, the
+# middleware and service/routes speak HTTP.
+HTTP_FREE = (
+    "service.errors",
+    "service.requests",
+    "service.clips",
+    "service.limits",
+    "service.registered_styles",
+    "service.registry",
+    "service.inference",
+    "service.dataplane",
+    "service.fbx",
+)
+
+
+def test_engines_and_the_data_plane_load_no_web_framework():
+    code = (
+        "import sys, importlib, pkgutil, service.engines\n"
+        "for m in pkgutil.iter_modules(service.engines.__path__):\n"
+        "    importlib.import_module('service.engines.' + m.name)\n"
+        f"for m in {HTTP_FREE!r}:\n"
+        "    importlib.import_module(m)\n"
+        "loaded = sorted({'fastapi', 'starlette'} & set(sys.modules))\n"
+        "assert not loaded, f'{loaded} imported'\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
