@@ -135,7 +135,7 @@ class FastEngine(Engine):
         motion = restyled_motion(channels, content, enc, self.stats, timer, self.output_smoothing,
                                  self.strength_of(style), job.foot_cleanup)  # fmt: skip
         with timer.stage("anatomy"):
-            motion = anatomical(motion, cycle)
+            motion = anatomical(motion, cycle, job.content)
         warnings: list[str] = []
         factor = 1.0
         if job.time_warp:

@@ -10,8 +10,9 @@ content back); the content's root trajectory (``features.decode_motion``); the f
 where the CONTENT's are, held on the content's floor (the knees bend to reach it down to
 ``grounding.KNEE_ABSORB`` of a leg, the hips move for the rest), and the feet the content
 has in the air kept clear of the floor (``grounding.pin_canonical_feet``); a looping clip's
-cycle, which ran wrapped around (:func:`wrapped`), cut back (:func:`anatomical`); knees
-and elbows bent only the way they bend, after every clean-up step. A time warp follows,
+cycle, which ran wrapped around (:func:`wrapped`), cut back (:func:`anatomical`); jumps
+no body makes bridged over (faster than real mocap and than the content at that step);
+knees and elbows bent only the way they bend, after every clean-up step. A time warp follows,
 clamped to [``MIN_WARP``, ``MAX_WARP``] and lowered where a joint would move faster than
 real mocap does (:func:`speed_capped`).
 """
@@ -24,7 +25,7 @@ from scipy.ndimage import gaussian_filter1d
 from motion import contacts as CT
 from motion import features as Fe
 from motion import grounding
-from motion.anatomy import SPEED_LIMIT, capped_warp, hinged
+from motion.anatomy import SPEED_LIMIT, capped_warp, despiked, hinged
 from motion.loops import Cycle
 from motion.skeleton import Motion
 from service.metrics import StageTimer
@@ -93,12 +94,14 @@ def wrapped(content: Motion, loop: bool, margin: int) -> tuple[Motion, Cycle | N
     return cycle.extended(content), cycle
 
 
-def anatomical(motion: Motion, cycle: Cycle | None) -> Motion:
-    """A restyled canonical motion cut back to its cycle (when it was :func:`wrapped`) and
-    with its knees and elbows bent only the way they bend (:func:`motion.anatomy.hinged`)."""
+def anatomical(motion: Motion, cycle: Cycle | None, content: Motion) -> Motion:
+    """A restyled canonical motion cut back to its cycle (when it was :func:`wrapped`),
+    without jumps faster than real mocap and the ``content`` it restyles move
+    (:func:`motion.anatomy.despiked`), and with its knees and elbows bent only the way they
+    bend (:func:`motion.anatomy.hinged`)."""
     if cycle is not None:
         motion = cycle.cropped(motion)
-    return hinged(motion)
+    return hinged(despiked(motion, content))
 
 
 def speed_capped(factor: float, motion: Motion) -> tuple[float, list[str]]:

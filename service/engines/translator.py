@@ -304,7 +304,7 @@ class TranslatorEngine(Engine):
         motion = restyled_motion(output, content, enc, self.stats, timer, self.output_smoothing,
                                  job.strength, job.foot_cleanup)  # fmt: skip
         with timer.stage("anatomy"):
-            motion = anatomical(motion, cycle)
+            motion = anatomical(motion, cycle, job.content)
         warnings = list(style.warnings)
         factor = 1.0
         if job.time_warp:

@@ -128,4 +128,4 @@ def test_the_targets_are_what_a_transfer_decodes():
     finished = restyled_motion(
         target, clip, Fe.encode(clip), engine.stats, timer, engine.output_smoothing
     )
-    np.testing.assert_array_equal(anatomical(finished, None).lrot, transferred.lrot)
+    np.testing.assert_array_equal(anatomical(finished, None, clip).lrot, transferred.lrot)

@@ -138,6 +138,50 @@ def test_a_knee_bent_the_wrong_way_is_seen_and_straightened(bandai):
     assert not anatomy.knees_backwards(fixed).any()
 
 
+def test_an_elbow_bent_the_wrong_way_is_seen_and_a_flexed_one_is_not(bandai):
+    def elbows_at(degrees: float):
+        lrot = bandai.lrot.copy()
+        for joint, child, axis, bend in anatomy.HINGES:
+            if joint in anatomy.ELBOWS:
+                rest = C.OFFSETS[C.INDEX[child]]
+                sense = np.sign(np.dot(np.cross(axis, rest), bend))  # turns rest toward bend
+                lrot[:, C.INDEX[joint]] = R.from_rotvec(axis * sense * np.radians(degrees))
+        return bandai.replace(lrot=lrot)
+
+    assert not anatomy.elbows_backwards(bandai).any()
+    assert not anatomy.elbows_backwards(elbows_at(60.0)).any()  # flexed
+    assert anatomy.elbows_backwards(elbows_at(-60.0)).all()  # bent back
+    assert not anatomy.elbows_backwards(anatomy.hinged(elbows_at(-60.0))).any()
+
+
+def with_upper_arm_twist_flip(motion, at: int):
+    """``motion`` with its left elbow flexed 90 degrees and, from frame ``at`` on, its upper
+    arm turned 150 degrees about its own axis: the hand swings round in one frame."""
+    lrot = motion.lrot.copy()
+    lrot[:, C.INDEX["LowerArm_L"]] = R.from_rotvec(np.array([0.0, np.pi / 2, 0.0]))
+    bone = C.OFFSETS[C.INDEX["LowerArm_L"]] / np.linalg.norm(C.OFFSETS[C.INDEX["LowerArm_L"]])
+    j = C.INDEX["UpperArm_L"]
+    lrot[at:, j] = R.mul(lrot[at:, j], R.from_rotvec(bone * np.radians(150.0)))
+    return motion.replace(lrot=lrot)
+
+
+def test_a_twist_flip_is_bridged_and_the_rest_left_bit_for_bit(bandai):
+    flexed = with_upper_arm_twist_flip(bandai, at=bandai.num_frames)  # no flip
+    flipped = with_upper_arm_twist_flip(bandai, at=60)
+    assert anatomy.peak_speed(flipped) > anatomy.SPEED_LIMIT + 2.0
+    fixed = anatomy.despiked(flipped, bandai)
+    assert anatomy.peak_speed(fixed) <= anatomy.SPEED_LIMIT
+    changed = np.flatnonzero((fixed.lrot != flipped.lrot).any(axis=(1, 2)))
+    assert 59 - anatomy.SPIKE_REACH <= changed.min() and changed.max() <= 60 + anatomy.SPIKE_REACH
+    assert anatomy.despiked(flexed, bandai) is flexed  # nothing faster than allowed
+
+
+def test_content_that_is_fast_itself_is_left_as_fast(bandai):
+    fast = time_warp(bandai, 2.5 * anatomy.SPEED_LIMIT / anatomy.peak_speed(bandai))
+    assert anatomy.peak_speed(fast) > 2 * anatomy.SPEED_LIMIT
+    assert anatomy.despiked(fast, fast) is fast
+
+
 def test_the_warp_is_capped_at_real_mocap_speeds(bandai):
     peak = anatomy.peak_speed(bandai)
     assert 0.5 < peak < anatomy.SPEED_LIMIT  # a walk: about a body height a second
