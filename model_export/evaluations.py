@@ -21,7 +21,9 @@ from training import eval_foreign as EF
 
 def record_foreign(report: dict, models_dir: Path) -> None:
     """The test half's headline figures into each judged model's manifest entry
-    (``metrics.evaluation.foreign_test_half``)."""
+    (``metrics.evaluation.foreign_test_half``): recognition, spread, content kept, foot
+    sliding and anatomy (knees and elbows bent backwards, the fastest joint), the last two
+    beside real Bandai's and, for anatomy, the content's own."""
     if report["half"] != "test":
         raise ValueError(f"the manifest records the test half, not {report['half']!r}")
     keep = (
@@ -37,6 +39,7 @@ def record_foreign(report: dict, models_dir: Path) -> None:
         "content_kept_share",
         "foot_sliding_cm_s",
         "intervals_90",
+        "anatomy",
     )
     real = report["real_bandai"]
     for family, figures in report["families"].items():
@@ -49,6 +52,8 @@ def record_foreign(report: dict, models_dir: Path) -> None:
                 "items": report["items"],
                 "real_leave_action_out_top1": real["leave_action_out"]["top1"],
                 "real_foot_sliding_cm_s": real["foot_sliding_cm_s"],
+                "real_anatomy": real["anatomy"],
+                "content_anatomy": report["unchanged"]["anatomy"],
                 "measured": report.get("measured", ""),
                 "machine": report["machine"],
                 "by": "python -m training.eval_foreign (16 merged styles)",

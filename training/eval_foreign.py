@@ -34,9 +34,10 @@ spread: the same between per-style mean descriptors of real Bandai takes of one 
 relative to the hips in the body's facing frame, the output resampled to the content's
 frame count (time warping changes it), centred 3D correlation per effector, averaged; the
 mean and the share at or above 0.85. Anatomy (``foreign_measures.Limbs``): the share of
-frames with a knee more than 2% of body height behind its hip-ankle line, the leg bent
-(over all outputs, and the worst output's), and the fastest joint in body heights a
-second, beside the content's and real Bandai's own. Foot sliding as ``judges.skating``, beside real
+frames with a knee more than 2% of body height behind its hip-ankle line, the leg bent,
+and with an elbow bent the way it cannot (``motion.anatomy.elbows_backwards``), over all
+outputs and the worst output's, and the fastest joint in body heights a second, beside
+the content's and real Bandai's own. Foot sliding as ``judges.skating``, beside real
 Bandai mocap and the content unchanged. Jitter, for the families with networks of their
 own (:func:`held_out_jitter`): their output's jerk against real mocap of the same timing,
 on Bandai's held-out takes. Baseline: what the judge says of the content

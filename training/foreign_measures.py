@@ -76,25 +76,33 @@ def style_spread(descriptors: np.ndarray, styles: list[str]) -> float:
 @dataclass(frozen=True)
 class Limbs:
     """What the anatomy figures need of a clip (:mod:`motion.anatomy`): its frames, those
-    with a knee bent backwards, and its fastest joint (body heights a second)."""
+    with a knee bent backwards, those with an elbow bent backwards, and its fastest joint
+    (body heights a second)."""
 
     frames: int
     backwards: int
+    elbows_backwards: int
     peak_speed: float
 
     @staticmethod
     def of(motion: Motion) -> Limbs:
-        backwards = int(anatomy.knees_backwards(motion).sum())
-        return Limbs(motion.num_frames, backwards, anatomy.peak_speed(motion))
+        return Limbs(
+            motion.num_frames,
+            int(anatomy.knees_backwards(motion).sum()),
+            int(anatomy.elbows_backwards(motion).sum()),
+            anatomy.peak_speed(motion),
+        )
 
 
 def limb_figures(limbs: list[Limbs]) -> dict:
-    """Knees bent backwards (share of all frames, the worst clip's share) and the fastest
-    joint (the fastest clip's, and the 99th percentile of the clips' fastest)."""
-    frames = sum(x.frames for x in limbs)
+    """Knees and elbows bent backwards (share of all frames, the worst clip's share) and
+    the fastest joint (the fastest clip's, and the 99th percentile of the clips' fastest)."""
+    frames = max(sum(x.frames for x in limbs), 1)
     return {
-        "knees_backwards": round(sum(x.backwards for x in limbs) / max(frames, 1), 5),
+        "knees_backwards": round(sum(x.backwards for x in limbs) / frames, 5),
         "knees_backwards_worst_clip": round(max(x.backwards / x.frames for x in limbs), 4),
+        "elbows_backwards": round(sum(x.elbows_backwards for x in limbs) / frames, 5),
+        "elbows_backwards_worst_clip": round(max(x.elbows_backwards / x.frames for x in limbs), 4),
         "peak_speed_bh_s": round(max(x.peak_speed for x in limbs), 2),
         "peak_speed_p99_bh_s": round(float(np.percentile([x.peak_speed for x in limbs], 99)), 2),
     }

@@ -70,17 +70,18 @@ def markdown(report: dict) -> str:
         f"{unchanged['foot_sliding_cm_s']:.1f}",
         f"{real['foot_sliding_cm_s']:.1f} (all takes)",
     )
-    row(
-        "knees bent backwards: share of frames; worst clip's",
-        lambda v: (
-            f"{v['anatomy']['knees_backwards']:.2%}; "
-            f"{v['anatomy']['knees_backwards_worst_clip']:.1%}"
-        ),
-        f"{unchanged['anatomy']['knees_backwards']:.2%}; "
-        f"{unchanged['anatomy']['knees_backwards_worst_clip']:.1%}",
-        f"{real['anatomy']['knees_backwards']:.3%}; "
-        f"{real['anatomy']['knees_backwards_worst_clip']:.1%} (all takes)",
-    )
+    for limb in ("knees", "elbows"):
+        key = f"{limb}_backwards"
+
+        def bent(a: dict, share: str = ".2%", key: str = key) -> str:
+            return f"{a[key]:{share}}; {a[key + '_worst_clip']:.1%}"
+
+        row(
+            f"{limb} bent backwards: share of frames; worst clip's",
+            lambda v, bent=bent: bent(v["anatomy"]),
+            bent(unchanged["anatomy"]),
+            bent(real["anatomy"], ".3%") + " (all takes)",
+        )
     row(
         "fastest joint, body heights/s: fastest clip; 99th percentile of clips",
         lambda v: (

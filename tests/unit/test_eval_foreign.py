@@ -272,6 +272,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         assert sum(b["n"] for b in figures["by_source"].values()) == len(names)
         limbs = figures["anatomy"]
         assert 0.0 <= limbs["knees_backwards"] <= limbs["knees_backwards_worst_clip"] <= 1.0
+        assert 0.0 <= limbs["elbows_backwards"] <= limbs["elbows_backwards_worst_clip"] <= 1.0
         assert 0.0 < limbs["peak_speed_p99_bh_s"] <= limbs["peak_speed_bh_s"]
         jitter = figures["held_out_jitter"]
         if family in EF.ADAPTERS:  # the families with networks of their own
@@ -281,6 +282,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
             assert jitter is None
     real = report["real_bandai"]["anatomy"]  # 3 frames of 76,197 (a dance); a sprint's 6.8
     assert real["knees_backwards"] < 1e-4 and 6.0 < real["peak_speed_bh_s"] < 8.0
+    assert real["elbows_backwards"] < 1e-4  # none of 76,197 frames
     reference = report["real_bandai"]["leave_action_out"]
     assert reference["n"] == 454
     clips = [g["n"] for g in reference["within_actor_groups"].values()]
@@ -293,6 +295,9 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
         entry = next(m for m in load_manifest(models).models if m.name == figures["model_name"])
         recorded = entry.metrics["evaluation"][EF.EVALUATION_KEY.get(family, "foreign_test_half")]
         assert recorded["items"] == 1 and recorded["top1"] == figures["top1"]
+        assert recorded["anatomy"] == figures["anatomy"]
+        assert recorded["real_anatomy"] == report["real_bandai"]["anatomy"]
+        assert recorded["content_anatomy"] == report["unchanged"]["anatomy"]
     with pytest.raises(ValueError, match="test half"):
         EV.record_foreign({**report, "half": "dev"}, models)
 
