@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> dict:
     from service.engines.translator import TranslatorEngine
     from service.manifest import load_manifest
     from service.metrics import StageTimer
-    from service.requests import StyleSource, TransferRequest
+    from service.requests import ContentClip, StyleSource, TransferRequest
     from training.data import data_dir
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -76,7 +76,8 @@ def main(argv: list[str] | None = None) -> dict:
         def once(style=style) -> tuple[float, dict, int]:
             started = time.perf_counter()
             timer = StageTimer(engine.name)
-            out = engine.infer(TransferRequest(Upload("content", data=data), style), timer)
+            content = ContentClip(Upload("content", data=data))
+            out = engine.infer(TransferRequest(content, style), timer)
             return time.perf_counter() - started, dict(timer.ms), out.frames
 
         once()  # warm-up: the bucket's shapes

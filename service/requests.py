@@ -9,9 +9,37 @@ from typing import Any
 
 import numpy as np
 
-from service.clips import GameOptions, Upload
+from service.clips import Clip, GameOptions, Upload, load_clip
+from service.config import Settings
 from service.metrics import StageTimer
 from service.registered_styles import RegisteredStyle
+
+# --- what both restyling families take ------------------------------------------------------
+
+
+@dataclass
+class ContentClip:
+    """The clip a request re-styles (/v1/transfer, /v1/stylize) and how to treat it: play
+    it at the style's speed (``time_warp``), pin its foot contacts (``foot_cleanup``), a
+    joint-name ``mapping``, the answer's ``format`` (None: the clip's own) and the game
+    options (loop, root motion)."""
+
+    upload: Upload
+    time_warp: bool = True
+    foot_cleanup: bool = True
+    mapping: dict[str, str] | None = None
+    format: str | None = None
+    game: GameOptions = field(default_factory=GameOptions)
+
+    @property
+    def filename(self) -> str | None:
+        return self.upload.filename
+
+    def load(self, settings: Settings, timer: StageTimer) -> Clip:
+        """The clip read, mapped and on the canonical skeleton (:func:`load_clip`)."""
+        return load_clip(self.upload, settings, timer, mapping=self.mapping,
+                         answer=self.format, game=self.game)  # fmt: skip
+
 
 # --- translator -------------------------------------------------------------------------------
 
@@ -37,14 +65,9 @@ class StyleSource:
 class TransferRequest:
     """``POST /v1/transfer``: a content clip in the style of ``style``."""
 
-    content: Upload
+    content: ContentClip
     style: StyleSource
     strength: float = 1.0
-    time_warp: bool = True
-    foot_cleanup: bool = True
-    mapping: dict[str, str] | None = None
-    format: str | None = None  # of the answer; None: the content's
-    game: GameOptions = field(default_factory=GameOptions)
 
 
 @dataclass
@@ -110,13 +133,8 @@ class Registration:
 class StylizeRequest:
     """``POST /v1/stylize``: a content clip and one named style."""
 
-    content: Upload
+    content: ContentClip
     style_name: str
-    foot_cleanup: bool = True
-    time_warp: bool = True
-    mapping: dict[str, str] | None = None
-    format: str | None = None  # of the answer; None: the content's
-    game: GameOptions = field(default_factory=GameOptions)
 
 
 # --- dance ------------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ import numpy as np
 
 from motion import features as Fe
 from motion.skeleton import Motion
-from service.clips import Clip, Result, load_clip, write_result
+from service.clips import Clip, Result, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.engines.restyling import (
@@ -114,10 +114,10 @@ class FastEngine(Engine):
     # --- the three steps ---------------------------------------------------------------------
 
     def prepare(self, request: StylizeRequest, timer: StageTimer) -> FastJob:
-        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping,
-                         answer=request.format, game=request.game)  # fmt: skip
-        return FastJob(clip.canonical, request.style_name, request.foot_cleanup,
-                       request.time_warp, clip, loop=clip.loop is not None)  # fmt: skip
+        content = request.content
+        clip = content.load(self.settings, timer)
+        return FastJob(clip.canonical, request.style_name, content.foot_cleanup,
+                       content.time_warp, clip, loop=clip.loop is not None)  # fmt: skip
 
     def predict(self, job: FastJob, timer: StageTimer) -> Stylized:
         """The family's core: the style's network on the content, finished at the style's

@@ -216,10 +216,10 @@ class TranslatorEngine(Engine):
         style = self._style_input(request.style, timer)
         if isinstance(request, StyleCodeRequest):
             return StyleCodeJob(style)
-        clip = load_clip(request.content, self.settings, timer, mapping=request.mapping,
-                         answer=request.format, game=request.game)  # fmt: skip
-        return TransferJob(clip.canonical, style, request.strength, request.time_warp,
-                           request.foot_cleanup, clip, loop=clip.loop is not None)  # fmt: skip
+        content = request.content
+        clip = content.load(self.settings, timer)
+        return TransferJob(clip.canonical, style, request.strength, content.time_warp,
+                           content.foot_cleanup, clip, loop=clip.loop is not None)  # fmt: skip
 
     def _style_input(self, style: StyleSource, timer: StageTimer) -> StyleInput:
         if style.kind == "style_name":

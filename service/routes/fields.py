@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, File, Form, Query, UploadFile
@@ -16,6 +15,7 @@ from service.clips import Format, GameOptions, LoopMode, RootMotion, Upload
 from service.config import Settings
 from service.deps import SettingsDep
 from service.errors import InvalidRequest, PayloadTooLarge, UnsupportedMediaType
+from service.requests import ContentClip
 
 # Media types a BVH upload may carry (clients label text files in many ways).
 TEXT_TYPES = ("text/", "application/octet-stream", "application/x-bvh", "application/bvh")
@@ -128,22 +128,6 @@ def parse_mix(text: str) -> dict[str, float]:
     return mix
 
 
-@dataclass
-class ContentFields:
-    """The fields of a request that re-styles a content clip (/v1/transfer, /v1/stylize)."""
-
-    content: Upload
-    time_warp: bool
-    foot_cleanup: bool
-    mapping: dict[str, str] | None
-    format: str | None
-    game: GameOptions
-
-    @property
-    def filename(self) -> str | None:
-        return self.content.filename
-
-
 async def read_content_fields(
     settings: SettingsDep,
     content: Annotated[UploadFile, File(description="content clip (BVH or glTF)")],
@@ -171,10 +155,10 @@ async def read_content_fields(
             "on the floor (vertical bob and facing kept)"
         ),
     ] = "keep",
-) -> ContentFields:
+) -> ContentClip:
     """The content fields as one dependency: the routes that re-style a clip declare them
-    once."""
-    return ContentFields(
+    once, and hand the request its :class:`ContentClip`."""
+    return ContentClip(
         upload(content, settings),
         time_warp,
         foot_cleanup,
@@ -184,4 +168,4 @@ async def read_content_fields(
     )
 
 
-ContentDep = Annotated[ContentFields, Depends(read_content_fields)]
+ContentDep = Annotated[ContentClip, Depends(read_content_fields)]

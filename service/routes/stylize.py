@@ -28,14 +28,6 @@ async def stylize_clip(
     clip: ContentDep,
     style_name: Annotated[str, Form(min_length=1, max_length=100)],
 ) -> Response:
-    job = StylizeRequest(
-        content=clip.content,
-        style_name=style_name,
-        foot_cleanup=clip.foot_cleanup,
-        time_warp=clip.time_warp,
-        mapping=clip.mapping,
-        format=clip.format,
-        game=clip.game,
-    )
+    job = StylizeRequest(clip, style_name)
     result = await plane.infer("fast", job, endpoint=answers.route_template(request))
     return answers.respond(result, upload_name=clip.filename)

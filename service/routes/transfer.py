@@ -135,16 +135,7 @@ async def transfer(
     style_fields: Annotated[StyleFields, Depends(read_style_fields)],
     strength: Annotated[float, Form(ge=0, le=1, description="0 keeps the content's style")] = 1.0,
 ) -> Response:
-    job = TransferRequest(
-        content=clip.content,
-        style=style_source(style_fields, settings),
-        strength=strength,
-        time_warp=clip.time_warp,
-        foot_cleanup=clip.foot_cleanup,
-        mapping=clip.mapping,
-        format=clip.format,
-        game=clip.game,
-    )
+    job = TransferRequest(clip, style_source(style_fields, settings), strength)
     endpoint = answers.route_template(request)
     result = await plane.infer("translator", job, endpoint=endpoint)
     return answers.respond(result, upload_name=clip.filename)

@@ -204,11 +204,12 @@ def test_the_networks_see_mirrored_frames_as_far_as_they_reach(shared_client, wa
     from motion import features as Fe
     from service.clips import Upload
     from service.metrics import StageTimer
-    from service.requests import StylizeRequest
+    from service.requests import ContentClip, StylizeRequest
 
     for frames in (3, 40, 60):  # 40 frames padded to 64 would leave 12 at each end
         source = bvh.dumps(bvh.loads(walk).slice(0, frames)).encode()
-        request = StylizeRequest(Upload("content", data=source, filename="walk.bvh"), STYLES[0])
+        content = ContentClip(Upload("content", data=source, filename="walk.bvh"))
+        request = StylizeRequest(content, STYLES[0])
         engine = shared_client.app.state.registry.engine_for("fast", request)
         reach = int(engine.entry.extra["receptive_field"])
         job = engine.prepare(request, StageTimer(engine.name))
@@ -223,9 +224,10 @@ def test_a_style_plays_at_its_own_strength(shared_client, walk, monkeypatch):
     bundle's (0.95): nearer the content."""
     from motion import kinematics as K
     from service.clips import Upload
-    from service.requests import StylizeRequest
+    from service.requests import ContentClip, StylizeRequest
 
-    request = StylizeRequest(Upload("content", data=walk, filename="walk.bvh"), "active")
+    content = ContentClip(Upload("content", data=walk, filename="walk.bvh"))
+    request = StylizeRequest(content, "active")
     engine = shared_client.app.state.registry.engine_for("fast", request)
     own, default = engine.style_info["active"].get("strength"), engine.strength
     assert own is not None and own > 1.0 > default  # the case is real
