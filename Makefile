@@ -92,14 +92,23 @@ export-fast: $(VENV)/.dev
 # Writes runs/eval/foreign-<half>.json; the judge is the committed training/foreign_judge.pt
 # (EVAL_FOREIGN_ARGS=--pin-judge trains and replaces it). record-evaluations puts the test
 # half's figures in the manifest.
+# A studio's library: LIBRARY=path/to/library MODELS=models/NAME (the folder motion-style-train
+# wrote) judges those models by a classifier of the library's own real takes, on the same
+# halves; it writes runs/eval/NAME/, and record-evaluations with the same two records it there.
 EVAL_FOREIGN_ARGS ?=
+LIBRARY ?=
+MODELS ?=
+LIBRARY_ARGS = $(if $(LIBRARY),$(if $(MODELS),--library $(LIBRARY) --models-dir $(MODELS),\
+	$(error LIBRARY needs MODELS, the models folder trained on it)))
 .PHONY: eval-foreign record-evaluations
 eval-foreign: $(VENV)/.dev
-	$(PY) -m training.eval_foreign $(EVAL_FOREIGN_ARGS)
+	$(PY) -m training.eval_foreign $(LIBRARY_ARGS) $(EVAL_FOREIGN_ARGS)
 
 # The evaluations write JSON; this one step records their figures in the models' entries.
 record-evaluations: $(VENV)/.dev
-	$(PY) -m model_export.evaluations $(wildcard runs/eval/foreign-test.json runs/eval/dance.json)
+	$(PY) -m model_export.evaluations $(if $(LIBRARY_ARGS),\
+	runs/eval/$(notdir $(abspath $(MODELS)))/foreign-test.json --models-dir $(MODELS),\
+	$(wildcard runs/eval/foreign-test.json runs/eval/dance.json))
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast

@@ -23,7 +23,9 @@ def record_foreign(report: dict, models_dir: Path) -> None:
     """The test half's headline figures into each judged model's manifest entry
     (``metrics.evaluation.foreign_test_half``): recognition, spread, content kept, foot
     sliding and anatomy (knees and elbows bent backwards, the fastest joint), the last two
-    beside real Bandai's and, for anatomy, the content's own."""
+    beside the real takes' and, for anatomy, the content's own; with the reference of the
+    judge that gave them: Bandai's leave-action-out, or a library's held-out takes
+    (``eval_foreign --library``)."""
     if report["half"] != "test":
         raise ValueError(f"the manifest records the test half, not {report['half']!r}")
     keep = (
@@ -41,7 +43,25 @@ def record_foreign(report: dict, models_dir: Path) -> None:
         "intervals_90",
         "anatomy",
     )
-    real = report["real_bandai"]
+    if "library" in report:
+        library = report["library"]
+        real = report["real_library"]
+        judged_on = {
+            "library": library["name"],
+            "library_sha256": library["sha256"],
+            "real_held_out_takes_top1": real["held_out_takes"]["top1"],
+            "real_held_out_takes_most_predicted_share": real["held_out_takes"][
+                "most_predicted_share"
+            ],
+        }
+        by = (
+            f"python -m training.eval_foreign --library {library['name']} (a judge trained "
+            f"on its {library['takes']} real takes, {len(report['styles'])} styles)"
+        )
+    else:
+        real = report["real_bandai"]
+        judged_on = {"real_leave_action_out_top1": real["leave_action_out"]["top1"]}
+        by = "python -m training.eval_foreign (16 merged styles)"
     for family, figures in report["families"].items():
         put_evaluation(
             figures["model_name"],
@@ -50,13 +70,13 @@ def record_foreign(report: dict, models_dir: Path) -> None:
             {
                 **{k: figures[k] for k in keep},
                 "items": report["items"],
-                "real_leave_action_out_top1": real["leave_action_out"]["top1"],
+                **judged_on,
                 "real_foot_sliding_cm_s": real["foot_sliding_cm_s"],
                 "real_anatomy": real["anatomy"],
                 "content_anatomy": report["unchanged"]["anatomy"],
                 "measured": report.get("measured", ""),
                 "machine": report["machine"],
-                "by": "python -m training.eval_foreign (16 merged styles)",
+                "by": by,
             },
             models_dir,
         )

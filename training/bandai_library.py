@@ -35,6 +35,15 @@ def held_out_take(name: str) -> bool:
     return base.startswith("dataset-2") and zlib.crc32(base.encode()) % 10 == 0
 
 
+def held_out_clip(clip) -> bool:
+    """Whether ``clip`` (``training.data.Clip``) was kept out of training: its library's
+    ``held_out`` label (``training.library``), else :func:`held_out_take` by its name
+    (``training.data.load_bandai``'s clips carry no labels)."""
+    if "held_out" in clip.extra:
+        return bool(clip.extra["held_out"])
+    return held_out_take(clip.name)
+
+
 def _row(file: str) -> dict[str, str]:
     stem = Path(file).stem
     _, content, style, _ = stem.split("_")

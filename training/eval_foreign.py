@@ -2,10 +2,19 @@
 
     python -m training.eval_foreign [--half dev|test|both] [--families translator fast]
         [--judge FILE | --pin-judge] [--classifier-cache DIR] [--out-dir DIR] [--limit N]
+        [--library LIB --models-dir models/NAME]
 
 writes ``foreign-<half>.json`` for each half judged (default ``runs/eval/``) and prints its
 tables; ``python -m model_export.evaluations runs/eval/foreign-test.json`` records the test
 half's figures in each model's manifest entry (``metrics.evaluation.foreign_test_half``).
+
+With ``--library``: the models a studio trained on its library (``motion-style-train LIB
+-o models/NAME``, in ``--models-dir``), judged by a classifier of that library's own real
+takes (``foreign_judge.train_library_judge``; its reference: the takes ``labels.csv``
+holds out, judged by a twin that never saw them), on the same halves of the same foreign
+content; the descriptors, spread, foot sliding and anatomy are measured against the
+library's takes, and the report goes to ``runs/eval/NAME/`` (``model_export.evaluations
+--models-dir models/NAME`` records it). Without, everything is Bandai's, as above.
 
 Families: the translator by style name, the fast networks, ``translator-clip``: the
 translator with one real Bandai take of the requested style as the style clip
@@ -67,7 +76,9 @@ from training.foreign_content import HALVES, Item, load_items
 from training.foreign_judge import (
     PINNED_JUDGE,
     StyleJudge,
+    held_out_reference,
     judge_for,
+    library_judge_for,
     pin_judge,
     recognition,
     reference,
@@ -136,12 +147,12 @@ class ByStyleClip:
     (:meth:`sendable`)."""
 
     def __init__(self, clips: list, unseen: bool = False) -> None:
-        from training.bandai_library import held_out_take
+        from training.bandai_library import held_out_clip
         from training.data import clip_motion
 
         self.takes: dict[str, list] = {}
         for c in clips:
-            if held_out_take(c.name) or not unseen:
+            if held_out_clip(c) or not unseen:
                 self.takes.setdefault(canonical_style(c.style), []).append(c)
         self.motion = clip_motion
         self.codes: dict[str, object] = {}
@@ -219,19 +230,17 @@ def take_intervals(
 
 @dataclass
 class Output:
-    """One item sent to one shipped style name, as the judge and the measures see it."""
+    """One item sent to one shipped style name (scored as ``style``), as the judge and the
+    measures see it."""
 
     item: Item
     name: str
+    style: str
     logp: np.ndarray
     descriptor: np.ndarray
     kept: float
     sliding: float
     limbs: Limbs
-
-    @property
-    def style(self) -> str:
-        return canonical_style(self.name)
 
 
 def send(
@@ -242,10 +251,11 @@ def send(
     real: RealBandai,
     log=print,
     adapter=None,
+    scored_as=canonical_style,
 ):
     """Every item through ``family``'s shipped ``engine`` to every shipped style name
     (``adapter(engine, item, name)``, else the family's own; an adapter's
-    :meth:`ByStyleClip.sendable` names only)."""
+    :meth:`ByStyleClip.sendable` names only), each output scored as ``scored_as(name)``."""
     names, outputs = style_names(ENGINE_OF.get(family, family), engine), []
     if adapter is None:
         adapter = ADAPTERS[family]
@@ -258,6 +268,7 @@ def send(
                 Output(
                     item,
                     name,
+                    scored_as(name),
                     judge.log_probabilities(out),
                     real.standardised(out),
                     content_kept(out, item.motion),
@@ -353,6 +364,10 @@ def unchanged_figures(items: list[Item], judge: StyleJudge) -> dict:
 # --------------------------------------------------------------------------- evaluation
 
 
+def _listed(names: list[str]) -> str:
+    return ", ".join(sorted(names))
+
+
 def evaluate(
     halves: tuple[str, ...],
     families: tuple[str, ...] = FAMILIES,
@@ -361,29 +376,53 @@ def evaluate(
     log=print,
     pinned: Path | None = None,
     pin: bool = False,
+    library: Path | None = None,
+    models_dir: Path | None = None,
 ) -> dict[str, dict]:
     """The report of each of ``halves`` (see the module docstring); ``limit``: only the first
     N items of each half (a smoke run). The judge is the ``pinned`` file where it exists,
     else trained (and kept in ``classifier_cache``); ``pin`` writes it to
-    :data:`PINNED_JUDGE`."""
-    from training.data import load_bandai
+    :data:`PINNED_JUDGE`. With ``library``: the models in ``models_dir`` judged against
+    that library's real takes (:func:`training.foreign_judge.train_library_judge`)."""
     from training.measuring_machine import measuring_machine
 
     started = time.time()
-    clips = load_bandai()
-    judge = judge_for(clips, classifier_cache, pinned)
-    if pin:
-        pin_judge(judge, clips)
-    seconds = {"judge": round(time.time() - started, 1)}
-    source = pinned if pinned is not None and pinned.exists() else "trained"
+    if library is None:
+        from training.data import load_bandai
+
+        clips, scored_as = load_bandai(), canonical_style
+    else:
+        from training import library as L
+
+        clips, scored_as = L.read_library(library), str
+    # the judge's classes, before it trains: a model it could not score stops the run here
+    real_styles = {scored_as(c.style) for c in clips}
+    loaded = {e: load_engine(e, models_dir) for e in {ENGINE_OF.get(f, f) for f in families}}
+    for e, (engine, entry, _) in loaded.items():
+        unjudged = {scored_as(n) for n in style_names(e, engine)} - real_styles
+        if unjudged:
+            raise ValueError(
+                f"{entry.name} serves style(s) {_listed(unjudged)} that the judge's real "
+                f"takes lack (they have {_listed(real_styles)})"
+            )
+    engines = {f: loaded[ENGINE_OF.get(f, f)] for f in families}
+    seconds = {"clips and engines": round(time.time() - started, 1)}
+    t = time.time()
+    if library is None:
+        judge = judge_for(clips, classifier_cache, pinned)
+        if pin:
+            pin_judge(judge, clips)
+        source = pinned if pinned is not None and pinned.exists() else "trained"
+    else:
+        judge = library_judge_for(clips, classifier_cache)
+        source = f"trained on library {Path(library).resolve().name}"
+    seconds["judge"] = round(time.time() - t, 1)
     log(f"judge ready ({source}, {seconds['judge']} s)")
     t = time.time()
     real = real_bandai(clips)
-    ref = reference(judge)
+    ref = reference(judge) if library is None else held_out_reference(judge)
     items = {h: v[:limit] if limit else v for h, v in load_items(halves).items()}
     seconds["references and items"] = round(time.time() - t, 1)
-    loaded = {e: load_engine(e) for e in {ENGINE_OF.get(f, f) for f in families}}
-    engines = {f: loaded[ENGINE_OF.get(f, f)] for f in families}
     adapters = {
         "translator-clip": ByStyleClip(clips),
         "translator-video": ByStyleVideo(clips),
@@ -395,10 +434,28 @@ def evaluate(
     for f in families:
         t = time.time()
         everything = [i for h in halves for i in items[h]]
-        outputs[f] = send(f, engines[f][0], everything, judge, real, log, adapters.get(f))
+        outputs[f] = send(
+            f, engines[f][0], everything, judge, real, log, adapters.get(f), scored_as
+        )
         if f in ADAPTERS:  # the families with networks of their own
             jitter[f] = held_out_jitter(f, engines[f][0], clips)
         seconds[f"{f} transfers and judging"] = round(time.time() - t, 1)
+    real_figures = {
+        "spread": round(real.spread, 4),
+        "spread_by_dataset": real.spread_by_dataset,
+        "foot_sliding_cm_s": round(real.sliding, 2),
+        "anatomy": real.anatomy,
+    }
+    if library is None:
+        real_section = {"real_bandai": {"leave_action_out": ref, **real_figures}}
+    else:
+        from training import library as L
+
+        lib, _ = L.read_labels(library)
+        real_section = {
+            "library": {"name": lib.name, "sha256": lib.content_hash(), "takes": len(clips)},
+            "real_library": {"held_out_takes": ref, **real_figures},
+        }
     reports = {}
     for h in halves:
         takes = sorted({i.take for i in items[h]})
@@ -422,13 +479,7 @@ def evaluate(
                 for f in families
             },
             "unchanged": unchanged_figures(items[h], judge),
-            "real_bandai": {
-                "leave_action_out": ref,
-                "spread": round(real.spread, 4),
-                "spread_by_dataset": real.spread_by_dataset,
-                "foot_sliding_cm_s": round(real.sliding, 2),
-                "anatomy": real.anatomy,
-            },
+            **real_section,
             "machine": measuring_machine(),
             "measured": time.strftime("%Y-%m-%d"),
             "seconds": {**seconds, "total": round(time.time() - started, 1)},
@@ -447,7 +498,9 @@ def main(argv: list[str] | None = None) -> int:
         help="keep the trained judge here (keyed by its code and the takes)",
     )
     p.add_argument(
-        "--out-dir", type=Path, default=REPO / "runs/eval", help="writes foreign-<half>.json here"
+        "--out-dir",
+        type=Path,
+        help="writes foreign-<half>.json here (default runs/eval, with --library runs/eval/NAME)",
     )
     p.add_argument(
         "--judge",
@@ -461,7 +514,22 @@ def main(argv: list[str] | None = None) -> int:
         help="train a judge (or take the cached one) and write it to the committed file",
     )
     p.add_argument("--limit", type=int, default=None, help="only the first N items of each half")
+    p.add_argument(
+        "--library",
+        type=Path,
+        help="judge by a classifier of this library's real takes (training.library)",
+    )
+    p.add_argument(
+        "--models-dir",
+        type=Path,
+        help="the models folder to judge (with --library, required: the one trained on it)",
+    )
     args = p.parse_args(argv)
+    if args.library is not None:
+        if args.models_dir is None:
+            p.error("--library needs --models-dir: the models folder trained on it")
+        if args.pin_judge:
+            p.error("--pin-judge pins Bandai's judge; a library's judge is trained from it")
     halves = HALVES if args.half == "both" else (args.half,)
     reports = evaluate(
         halves,
@@ -470,12 +538,17 @@ def main(argv: list[str] | None = None) -> int:
         args.limit,
         pinned=None if args.pin_judge else args.judge,
         pin=args.pin_judge,
+        library=args.library,
+        models_dir=args.models_dir,
     )
-    args.out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = args.out_dir or REPO / "runs/eval"
+    if args.out_dir is None and args.library is not None:
+        out_dir = out_dir / args.models_dir.resolve().name
+    out_dir.mkdir(parents=True, exist_ok=True)
     for h, report in reports.items():
         print()
         print(markdown(report))
-        (args.out_dir / f"foreign-{h}.json").write_text(json.dumps(report, indent=1))
+        (out_dir / f"foreign-{h}.json").write_text(json.dumps(report, indent=1))
     return 0
 
 

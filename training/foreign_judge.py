@@ -15,6 +15,10 @@ different, and the same outputs score 3-4 points apart. It carries what it said 
 real takes and refuses to judge if it now says otherwise (the features changed). Without
 it, trained classifiers and the reference are cached by a hash of the code and the takes.
 
+A studio's library (``eval_foreign --library``) has a judge of its own,
+:func:`train_library_judge`: the same classifier on the library's takes and style labels,
+its reference the takes ``labels.csv`` holds out (:func:`held_out_reference`).
+
 Style or actor: in Bandai dataset-2 each style is one actor, three actors sharing seven
 styles. Every clip is retargeted onto one canonical skeleton (bone lengths averaged over
 the data) before features are taken, so body proportions, the plainest trace of an
@@ -161,16 +165,84 @@ def judge_for(clips: list, cache: Path | None, pinned: Path | None = None) -> St
     if cache is None:
         return train_judge(clips)
     path = Path(cache) / f"foreign-judge-{judge_key(clips)[:16]}.pkl"
+    return _cached(path, lambda: train_judge(clips))
+
+
+def _cached(path: Path, make) -> StyleJudge:
     if path.exists():
         with path.open("rb") as f:
             return pickle.load(f)
-    judge = train_judge(clips)
+    judge = make()
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".partial")
     with partial.open("wb") as f:
         pickle.dump(judge, f)
     partial.replace(path)
     return judge
+
+
+def train_library_judge(clips: list) -> StyleJudge:
+    """The judge of a studio's library (``training.library`` clips): the classifier of every
+    take, and of the mirror image of each whose ``mirror_ok``, by the library's own style
+    labels (no names merged). Its reference (``held_out``, group ``held-out``): what a twin
+    trained without the takes ``labels.csv`` holds out makes of each of them. Those takes
+    share performers and actions with the rest, so the reference is nearer a ceiling than
+    Bandai's leave-action-out one."""
+    from training.bandai_library import held_out_clip
+
+    feats = [frame_features(c.motion) for c in clips]
+    mirrors = {
+        i: frame_features(C.mirrored(c.motion))
+        for i, c in enumerate(clips)
+        if c.extra.get("mirror_ok", True)
+    }
+    labels = [c.style for c in clips]
+
+    def classifier(rows: list[int]) -> ConvClipClassifier:
+        flipped = [i for i in rows if i in mirrors]
+        return ConvClipClassifier(
+            [feats[i] for i in rows] + [mirrors[i] for i in flipped],
+            [labels[i] for i in rows] + [labels[i] for i in flipped],
+        )
+
+    held = [i for i, c in enumerate(clips) if held_out_clip(c)]
+    if not held:
+        raise ValueError(
+            "the library holds no take out (labels.csv's held_out): "
+            "no real take is left to check its judge on"
+        )
+    judge = StyleJudge(classifier(list(range(len(clips)))), [])
+    twin = classifier([i for i in range(len(clips)) if i not in set(held)])
+    if twin.classes != judge.classes:
+        raise ValueError(
+            f"style(s) {', '.join(sorted(set(judge.classes) - set(twin.classes)))} "
+            "have only held-out takes: the judge's reference could not name them"
+        )
+    for i in held:
+        c = clips[i]
+        judge.held_out.append(
+            {
+                "take": c.take,
+                "dataset": c.dataset,
+                "content": c.content,
+                "style": labels[i],
+                "group": "held-out",
+                "logp": twin.log_probabilities(feats[i]),
+            }
+        )
+    return judge
+
+
+def library_judge_for(clips: list, cache: Path | None) -> StyleJudge:
+    """:func:`train_library_judge` of a library's ``clips``, kept in ``cache`` under
+    :func:`judge_key` and that function's code."""
+    if cache is None:
+        return train_library_judge(clips)
+    key = hashlib.sha256((judge_key(clips) + inspect.getsource(train_library_judge)).encode())
+    return _cached(
+        Path(cache) / f"library-judge-{key.hexdigest()[:16]}.pkl",
+        lambda: train_library_judge(clips),
+    )
 
 
 def pin_judge(judge: StyleJudge, clips: list, path: Path = PINNED_JUDGE) -> None:
@@ -288,4 +360,14 @@ def reference(judge: StyleJudge) -> dict:
         for g in sorted({h["group"] for h in held})
     }
     figures["within_actor_groups"] = within_actor(held, judge.classes)
+    return figures
+
+
+def held_out_reference(judge: StyleJudge) -> dict:
+    """A library judge's figures on the library's held-out takes (:func:`train_library_judge`)."""
+    held = judge.held_out
+    figures = recognition(
+        [h["style"] for h in held], np.array([h["logp"] for h in held]), judge.classes
+    )
+    figures.pop("predicted")
     return figures

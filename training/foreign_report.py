@@ -10,19 +10,50 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{x:.0%}"
 
 
+def _real_clips(report: dict) -> tuple[dict, dict, dict[str, str]]:
+    """The real clips' figures of a report, its judge's reference figures, and the words for
+    them: Bandai's (leave-action-out) or a library's (its held-out takes)."""
+    if "real_library" in report:
+        real = report["real_library"]
+        name = report["library"]["name"]
+        return (
+            real,
+            real["held_out_takes"],
+            {
+                "styles": f"styles of library {name}",
+                "real": f"real {name}, held-out takes",
+                "recall": "real: held-out takes recall",
+                "style": "style",
+                "jitter": "the library's held-out takes",
+            },
+        )
+    real = report["real_bandai"]
+    return (
+        real,
+        real["leave_action_out"],
+        {
+            "styles": "merged styles",
+            "real": "real Bandai, leave-action-out",
+            "recall": "real: leave-action-out recall",
+            "style": "style (merged)",
+            "jitter": "Bandai's held-out takes",
+        },
+    )
+
+
 def markdown(report: dict) -> str:
     """Tables of one half's report."""
-    fams, ref = report["families"], report["real_bandai"]["leave_action_out"]
-    unchanged, real = report["unchanged"], report["real_bandai"]
+    fams, unchanged = report["families"], report["unchanged"]
+    real, ref, words = _real_clips(report)
     counts = ", ".join(f"{s} {n}" for s, n in report["items_by_source"].items())
     lines = [
         f"### Foreign content, {report['half']} half: {report['items']} items of "
         f"{len(report['takes'])} takes ({counts}); "
-        f"{len(report['styles'])} merged styles, chance {report['chance']:.1%}",
+        f"{len(report['styles'])} {words['styles']}, chance {report['chance']:.1%}",
         "",
         "| | "
         + " | ".join(f"{f} ({v['model_version']})" for f, v in fams.items())
-        + " | content unchanged | real Bandai, leave-action-out |",
+        + f" | content unchanged | {words['real']} |",
         "|---|" + "---|" * (len(fams) + 2),
     ]
 
@@ -93,16 +124,16 @@ def markdown(report: dict) -> str:
         " (all takes)",
     )
     row(
-        "jerk against real mocap, Bandai's held-out takes in their own style",
+        f"jerk against real mocap, {words['jitter']} in their own style",
         lambda v: f"{v['held_out_jitter']['ratio']:.2f}" if v.get("held_out_jitter") else "-",
         "-",
         "1",
     )
     lines += [
         "",
-        "| style (merged) | "
+        f"| {words['style']} | "
         + " | ".join(f"{f} recall" for f in fams)
-        + " | unchanged: share predicted | real: leave-action-out recall |",
+        + f" | unchanged: share predicted | {words['recall']} |",
         "|---|" + "---|" * (len(fams) + 2),
     ]
     for s in report["styles"]:
@@ -142,20 +173,29 @@ def markdown(report: dict) -> str:
         )
     agree = ", ".join(f"{f} {_pct(v['variants_agree'])}" for f, v in fams.items())
     lines += ["", f"Rig variants said to be in the same style as their original: {agree}."]
-    lines += [
-        "",
-        "Judge on real Bandai, leave-action-out: top-1 by held-out action group "
-        + ", ".join(f"{g} {_pct(v)}" for g, v in ref["by_action_group"].items())
-        + ".",
-        "",
-        "| actor group (dataset-2) | clips | right style among the group's | chance | top-1 |",
-        "|---|---|---|---|---|",
-    ]
-    for g, v in ref["within_actor_groups"].items():
-        lines.append(
-            f"| {g} | {v['n']} | {_pct(v['recall_within_group'])} | {_pct(v['chance'])} | "
-            f"{_pct(v['top1'])} |"
-        )
+    if "by_action_group" in ref:
+        lines += [
+            "",
+            "Judge on real Bandai, leave-action-out: top-1 by held-out action group "
+            + ", ".join(f"{g} {_pct(v)}" for g, v in ref["by_action_group"].items())
+            + ".",
+            "",
+            "| actor group (dataset-2) | clips | right style among the group's | chance | top-1 |",
+            "|---|---|---|---|---|",
+        ]
+        for g, v in ref["within_actor_groups"].items():
+            lines.append(
+                f"| {g} | {v['n']} | {_pct(v['recall_within_group'])} | {_pct(v['chance'])} | "
+                f"{_pct(v['top1'])} |"
+            )
+    else:
+        lines += [
+            "",
+            f"Judge trained on the {report['library']['takes']} real takes of library "
+            f"{report['library']['name']} (sha256 {report['library']['sha256'][:12]}); "
+            f"its reference: the {ref['n']} takes labels.csv holds out, judged by a twin "
+            "trained without them.",
+        ]
     lines += [
         "",
         f"Machine: {report['machine']}. Seconds: "

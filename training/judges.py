@@ -328,20 +328,19 @@ def segments(
 
 def held_out_jitter(family: str, engine, clips: list) -> dict:
     """How much a family's output jerks against real mocap with the same timing: each of
-    Bandai's held-out dataset-2 takes (``training.bandai_library.held_out_take``, never
-    trained on as content), its first 8 s restyled to its own style without the time warp,
-    against the take itself. ``ratio`` 1: as smooth as the real performance; jitter from
-    any step (the window blend, the foot clean-up) raises it, the output smoothing lowers
-    it. Foreign content
-    cannot say this: its mocap is noisier than Bandai's, and nothing real has its
-    timing in another style."""
-    from training.bandai_library import held_out_take
+    the held-out takes of ``clips`` (Bandai's dataset-2 ones or a library's,
+    ``training.bandai_library.held_out_clip``: never trained on as content), its first 8 s
+    restyled to its own style without the time warp, against the take itself. ``ratio`` 1:
+    as smooth as the real performance; jitter from any step (the window blend, the foot
+    clean-up) raises it, the output smoothing lowers it. Foreign content cannot say this:
+    its mocap is noisier than Bandai's, and nothing real has its timing in another style."""
+    from training.bandai_library import held_out_clip
 
-    takes = [c for c in clips if held_out_take(c.name)]
+    takes = [c for c in clips if held_out_clip(c)]
     if not takes:
         styles = ", ".join(sorted({c.style for c in clips}))
         raise ValueError(
-            f"{family}: no held-out Bandai take is in one of its styles ({styles}) "
+            f"{family}: no held-out take is in one of its styles ({styles}) "
             "to measure its jitter on"
         )
     real, out = [], []

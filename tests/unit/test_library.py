@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,6 +21,9 @@ from training import library as L
 from training import library_check as LC
 
 REPO = Path(__file__).resolve().parents[2]
+# where the foreign evaluation's clips are cached for every run (this module's tests keep
+# their libraries' caches apart)
+SHARED_CACHE = Path(os.environ.get("MOTION_CACHE_DIR", REPO / "cache"))
 
 
 def _slowed(motion, fps: float):
@@ -225,17 +229,31 @@ def _train_argv(library: Path, tmp_path: Path) -> list[str]:
     ]  # fmt: skip
 
 
+@pytest.fixture(scope="module")
+def trained_studio(good_library, tmp_path_factory) -> tuple[list[str], Path]:
+    """:func:`good_library` trained by the one command, a few steps of each stage: its
+    arguments and the folder it wrote under (models/studio, work, runs)."""
+    pytest.importorskip("torch")
+    from model_export import train_library as TL
+
+    tmp = tmp_path_factory.mktemp("trained")
+    argv = _train_argv(good_library, tmp)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("MOTION_SMOKE", "1")  # a few steps of each
+        patch.setenv("MOTION_CACHE_DIR", str(tmp / "cache"))
+        assert TL.main(argv) == 0
+    return argv, tmp
+
+
 @pytest.mark.slow
 def test_one_command_trains_both_families_that_the_service_loads(
-    good_library, tmp_path, monkeypatch
+    good_library, trained_studio, monkeypatch
 ):
-    pytest.importorskip("torch")
     from model_export import train_library as TL
     from training.judges import load_engine, transfer
 
-    monkeypatch.setenv("MOTION_SMOKE", "1")  # a few steps of each
-    argv = _train_argv(good_library, tmp_path)
-    assert TL.main(argv) == 0
+    monkeypatch.setenv("MOTION_SMOKE", "1")
+    argv, tmp_path = trained_studio
     out = tmp_path / "models" / "studio"
     models = {m["name"]: m for m in json.loads((out / "manifest.json").read_text())["models"]}
     assert set(models) == {"translator-studio", "fast-studio"}
@@ -259,6 +277,134 @@ def test_one_command_trains_both_families_that_the_service_loads(
     stamp = (tmp_path / "work" / "translator.pt").stat().st_mtime_ns
     assert TL.main(argv) == 0
     assert (tmp_path / "work" / "translator.pt").stat().st_mtime_ns == stamp
+
+
+def _few_steps(monkeypatch) -> list[tuple[int, list[str]]]:
+    """The style judge's classifiers trained 3 steps of one seed; the clips (mirrors
+    included) and labels each one is given."""
+    from training.judges import ConvClipClassifier
+
+    given = []
+    train = ConvClipClassifier.__init__
+
+    def recording(self, features, labels, seeds=(0,), steps=3):
+        given.append((len(features), list(labels)))
+        train(self, features, labels, seeds, steps)
+
+    monkeypatch.setattr(ConvClipClassifier, "__init__", recording)
+    return given
+
+
+def test_a_librarys_judge_knows_its_styles_and_is_checked_on_its_held_out_takes(
+    good_library, monkeypatch
+):
+    from dataclasses import replace
+
+    from training import foreign_judge as FJ
+
+    given = _few_steps(monkeypatch)
+    clips = L.read_library(good_library)
+    judge = FJ.train_library_judge(clips)
+    assert judge.classes == ["brisk", "slow"]  # the table's names, none merged
+    # the judge: every take and its mirror; its twin: all but the two held out
+    assert [n for n, _ in given] == [16, 12]
+    assert sorted(given[1][1]) == ["brisk"] * 6 + ["slow"] * 6
+    assert [(h["take"], h["style"]) for h in judge.held_out] == [
+        ("clips/c02", "slow"),
+        ("clips/c06", "brisk"),
+    ]
+    reference = FJ.held_out_reference(judge)
+    assert reference["n"] == 2 and set(reference["recall"]) == {"brisk", "slow"}
+    assert 0.0 <= reference["top1"] <= reference["top3"] == 1.0  # two classes
+    # a take whose mirror is no take of its style is not mirrored
+    given.clear()
+    unmirrored = [replace(c, extra={**c.extra, "mirror_ok": c.take != "clips/c01"}) for c in clips]
+    FJ.train_library_judge(unmirrored)
+    assert [n for n, _ in given] == [15, 11]
+    nothing_held = [replace(c, extra={**c.extra, "held_out": False}) for c in clips]
+    with pytest.raises(ValueError, match="holds no take out"):
+        FJ.train_library_judge(nothing_held)
+    brisk_held = [replace(c, extra={**c.extra, "held_out": c.style == "brisk"}) for c in clips]
+    with pytest.raises(ValueError, match="brisk have only held-out takes"):
+        FJ.train_library_judge(brisk_held)
+
+
+def test_eval_foreign_with_a_library_needs_the_models_trained_on_it(good_library, capsys):
+    from training import eval_foreign as EF
+
+    with pytest.raises(SystemExit) as stop:
+        EF.main(["--library", str(good_library)])
+    assert stop.value.code == 2 and "--library needs --models-dir" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_eval_foreign_judges_a_librarys_models_by_its_own_takes(
+    good_library, trained_studio, tmp_path, monkeypatch
+):
+    """``make eval-foreign LIBRARY=... MODELS=...`` on one foreign item of the test half
+    (a judge of a few steps), then ``make record-evaluations`` with the same two: the
+    figures land in the library's models' own entries; the shipped models, whose styles
+    the library lacks, are refused before anything trains."""
+    import shutil
+
+    from model_export import evaluations as EV
+    from service.manifest import load_manifest
+    from tests.conftest import data_path
+    from training import eval_foreign as EF
+    from training import foreign_report as FR
+
+    for folder in ("cmu-31", "xia", "cmu-dance-43", "cmu-dance-3dsmax"):
+        data_path(folder)
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(SHARED_CACHE))
+    given = _few_steps(monkeypatch)
+    _, trained = trained_studio
+    models = tmp_path / "studio"
+    shutil.copytree(trained / "models" / "studio", models)
+    with pytest.raises(ValueError, match=r"translator-.* serves style\(s\) .*active"):
+        EF.evaluate(("test",), ("translator",), library=good_library, log=lambda *_: None)
+    assert given == []
+    families = ("translator", "fast")
+    cache = tmp_path / "judges"
+    report = EF.evaluate(
+        ("test",), families, cache, limit=1, log=lambda *_: None,
+        library=good_library, models_dir=models,
+    )["test"]  # fmt: skip
+    assert report["styles"] == ["brisk", "slow"] and report["items"] == 1
+    content_hash = L.read_labels(good_library)[0].content_hash()
+    assert report["library"] == {"name": "studio", "sha256": content_hash, "takes": 8}
+    assert "real_bandai" not in report
+    reference = report["real_library"]["held_out_takes"]
+    assert reference["n"] == 2 and report["real_library"]["spread"] > 0.0
+    for family in families:
+        figures = report["families"][family]
+        assert figures["model_name"] == f"{family}-studio"
+        assert figures["names_sent"] == ["brisk", "slow"] and figures["n"] == 2
+        assert set(figures["predicted_share"]) <= {"brisk", "slow"}
+        assert figures["held_out_jitter"]["takes"] == 2
+    text = FR.markdown(report)
+    assert "2 styles of library studio" in text and "real studio, held-out takes" in text
+    assert "leave-action-out" not in text and "the library's held-out takes" in text
+    # a second run takes the judge from the cache
+    assert len(given) == 2 and list(cache.glob("library-judge-*.pkl"))
+    EF.evaluate(
+        ("test",), ("fast",), cache, limit=1, log=lambda *_: None,
+        library=good_library, models_dir=models,
+    )  # fmt: skip
+    assert len(given) == 2
+    EV.main([str(_written(report, tmp_path)), "--models-dir", str(models)])
+    for family in families:
+        entry = next(m for m in load_manifest(models).models if m.name == f"{family}-studio")
+        recorded = entry.metrics["evaluation"]["foreign_test_half"]
+        assert recorded["top1"] == report["families"][family]["top1"]
+        assert recorded["library"] == "studio" and recorded["library_sha256"] == content_hash
+        assert recorded["real_held_out_takes_top1"] == reference["top1"]
+        assert "--library studio" in recorded["by"] and "16 merged" not in recorded["by"]
+
+
+def _written(report: dict, folder: Path) -> Path:
+    path = folder / "foreign-test.json"
+    path.write_text(json.dumps(report))
+    return path
 
 
 @pytest.mark.slow
