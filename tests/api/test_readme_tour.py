@@ -34,6 +34,19 @@ def test_the_readme_points_only_inside_the_repo():
         assert (REPO / link).exists(), f"README links {link}, which is not in the repo"
 
 
+def test_every_setting_is_documented_and_the_readme_names_only_real_ones():
+    from service.config import Settings
+
+    def variables(text: str) -> set[str]:
+        return set(re.findall(r"MOTION_[A-Z_]*[A-Z]", text))
+
+    real = {"MOTION_" + name.upper() for name in Settings.model_fields}
+    documented = variables((REPO / "docs" / "operations.md").read_text())
+    assert real <= documented, f"docs/operations.md misses {sorted(real - documented)}"
+    table = variables(README.read_text().split("## Settings", 1)[1].split("\n## ", 1)[0])
+    assert table and table <= real, f"the README's settings name {sorted(table - real)}"
+
+
 @pytest.mark.skipif(shutil.which("curl") is None, reason="the tour uses curl")
 def test_the_readme_tour_works_as_written(tmp_path):
     commands = tour_commands()

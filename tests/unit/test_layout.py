@@ -46,8 +46,8 @@ def test_importing_motion_loads_no_torch():
     assert r.returncode == 0, r.stderr
 
 
-# The service's data plane and its engines; only service.main, service.problems, the
-# middleware and service/routes speak HTTP.
+# The data plane and its engines; only service.main, problems, middleware, auth, deps and
+# service/routes speak HTTP.
 HTTP_FREE = (
     "service.errors",
     "service.requests",
