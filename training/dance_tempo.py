@@ -29,6 +29,7 @@ import numpy as np
 
 from motion import audio_decode, spectral
 from motion import beat_tracking as BT
+from training.reports import publish
 
 TOLERANCE = 0.04
 CYCLE_BEATS = {"cha-cha": 2, "rumba": 2, "tango": 2, "waltz": 3}  # dance_alignment's
@@ -135,10 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps({g: round(c, 1) for g, c in centres.items()}))
         return 0
     report = study()
-    print(markdown(report))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=1))
+    publish(report, markdown(report), args.json)
     return 0
 
 

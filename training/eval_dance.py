@@ -61,6 +61,7 @@ from service.engines.dance import DanceJob
 from service.metrics import StageTimer
 from training import dance_metrics as DM
 from training.measuring_machine import measuring_machine
+from training.reports import publish
 
 TEN_MINUTES = 600.0
 BLOCK = 30.0  # seconds per energy block
@@ -503,11 +504,7 @@ def main(argv: list[str] | None = None) -> int:
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
     else:
         report = evaluate(args.seeds)
-    print()
-    print(markdown(report))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=1))
+    publish(report, markdown(report), args.json)
     return 0
 
 

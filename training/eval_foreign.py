@@ -57,7 +57,6 @@ unchanged. How far the recognition figures could move with other takes of the sa
 from __future__ import annotations
 
 import argparse
-import json
 import time
 import zlib
 from collections import Counter
@@ -101,6 +100,7 @@ from training.judges import (
     style_names,
     transfer,
 )
+from training.reports import publish
 
 REPO = Path(__file__).resolve().parent.parent
 STYLE_FROM = (
@@ -544,11 +544,8 @@ def main(argv: list[str] | None = None) -> int:
     out_dir = args.out_dir or REPO / "runs/eval"
     if args.out_dir is None and args.library is not None:
         out_dir = out_dir / args.models_dir.resolve().name
-    out_dir.mkdir(parents=True, exist_ok=True)
     for h, report in reports.items():
-        print()
-        print(markdown(report))
-        (out_dir / f"foreign-{h}.json").write_text(json.dumps(report, indent=1))
+        publish(report, markdown(report), out_dir / f"foreign-{h}.json")
     return 0
 
 
