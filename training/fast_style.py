@@ -25,6 +25,7 @@ import argparse
 import datetime as dt
 import json
 import multiprocessing
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -188,14 +189,17 @@ def train_style(name: str, args: argparse.Namespace) -> dict:
     result["trained_at"] = dt.date.today().isoformat()
     ckpt_dir = Path(args.checkpoint_dir)
     ckpt_dir.mkdir(parents=True, exist_ok=True)
+    path = ckpt_dir / f"style_{name}.pt"
+    # whole or absent: the one command skips the styles whose file exists
     torch.save(
         {
             "model": net.state_dict(),
             "config": {"hidden": args.hidden, "style": name},
             "result": result,
         },
-        ckpt_dir / f"style_{name}.pt",
+        f"{path}.tmp",
     )
+    os.replace(f"{path}.tmp", path)
     print(f"style {name}: {json.dumps(result)}", flush=True)
     return result
 

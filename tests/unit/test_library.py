@@ -442,6 +442,93 @@ def test_a_stopped_stage_resumes_to_the_weights_of_an_uninterrupted_one(
         assert torch.equal(value, b["weights"][key]), key
 
 
+def _step(checkpoint: Path) -> int:
+    import torch
+
+    return torch.load(checkpoint, weights_only=False)["step"] if checkpoint.exists() else 0
+
+
+@pytest.mark.slow
+def test_a_run_killed_at_a_random_step_resumes_to_the_weights_of_an_uninterrupted_one(
+    good_library, tmp_path
+):
+    """The schedule's stage made short (24 steps of 32 channels, a checkpoint after every
+    step, so that the kill may land anywhere, a write included), killed with SIGKILL at a
+    random step, then started again as the one command starts it: it ends with the weights
+    of a run never stopped, to the bit."""
+    import random
+    import signal
+    import time
+
+    torch = pytest.importorskip("torch")
+    from model_export import train_library as TL
+    from training.translator import fit
+    from training.translator.schedule import load_schedule
+
+    short = {"channels": 32, "steps": 24, "batch": 8, "val-every": 8, "checkpoint-minutes": 0}
+    stage = load_schedule()[0]
+    stage = stage | {"flags": stage["flags"] | short}
+    common = ["--library", str(good_library), "--log", str(tmp_path / "runs")]
+    whole = tmp_path / "whole.pt"
+    fit.main(TL.translator_flags(stage, whole, []) + common)
+    killed = tmp_path / "killed.pt"
+    at = random.randrange(2, 16)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "training.translator.fit",
+         *TL.translator_flags(stage, killed, []), *common],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        deadline = time.time() + 300
+        while _step(killed) < at:
+            assert run.poll() is None and time.time() < deadline, f"no step {at} to kill at"
+            time.sleep(0.02)
+        run.send_signal(signal.SIGKILL)
+    finally:
+        run.kill()
+        run.wait()
+    stopped = torch.load(killed, weights_only=False)
+    assert at <= stopped["step"] < 24 and stopped["stages"] == [], (at, stopped["step"])
+    flags = TL.translator_flags(stage, killed, [])
+    assert "--resume" in flags
+    fit.main(flags + common)
+    a = torch.load(whole, weights_only=False)
+    b = torch.load(killed, weights_only=False)
+    assert a["step"] == b["step"] == 24 and b["stages"] == ["paired"]
+    for key, value in a["weights"].items():
+        assert torch.equal(value, b["weights"][key]), (key, at, stopped["step"])
+
+
+def test_a_checkpoint_state_ahead_of_its_payload_resumes_from_the_state(good_library, tmp_path):
+    """Killed between the two writes of a checkpoint (the state is written first), a run
+    resumes from the state's weights and step, not from the older payload's."""
+    torch = pytest.importorskip("torch")
+    from model_export import train_library as TL
+    from training.translator import fit
+    from training.translator.schedule import load_schedule
+
+    short = {"channels": 32, "steps": 3, "batch": 4, "val-every": 10, "checkpoint-minutes": 0}
+    stage = load_schedule()[0]
+    stage = stage | {"flags": stage["flags"] | short}
+    common = ["--library", str(good_library), "--log", str(tmp_path / "runs")]
+    whole = tmp_path / "whole.pt"
+    fit.main(TL.translator_flags(stage, whole, []) + common + ["--max-minutes", "1e-9"])
+    older = whole.read_bytes()  # the payload after step 1
+    fit.main(TL.translator_flags(stage, whole, []) + common + ["--max-minutes", "1e-9"])
+    state = torch.load(f"{whole}.state", weights_only=False)
+    assert state["step"] == 2
+    whole.write_bytes(older)  # as if killed before the payload of step 2 was written
+    fit.main(TL.translator_flags(stage, whole, []) + common)
+    again = tmp_path / "again.pt"
+    fit.main(TL.translator_flags(stage, again, []) + common)
+    a = torch.load(whole, weights_only=False)
+    b = torch.load(again, weights_only=False)
+    assert a["step"] == b["step"] == 3
+    for key, value in a["weights"].items():
+        assert torch.equal(value, b["weights"][key]), key
+
+
 @pytest.mark.slow
 def test_the_bandai_library_holds_what_training_read_by_file_names(data_dir, tmp_path):
     """training.bandai_library's labels.csv: the clips, labels and held-out takes that

@@ -377,10 +377,11 @@ class Trainer:
     # --- checkpoints -----------------------------------------------------------------------
 
     def save(self, path: Path, finished: str | None = None) -> None:
-        """Weights, configurations, statistics and styles in ``path``; the optimiser and the
-        random state (for ``--resume``) in ``path.state``, never committed. Under
-        ``torchrun`` every process calls it (each one's random state is kept), the first
-        writes."""
+        """Weights, configurations, statistics and styles in ``path``; the optimiser, the
+        random state and the weights again (for ``--resume``) in ``path.state``, never
+        committed, written first: a run killed between the two writes resumes from the
+        state, never older than the payload beside it. Under ``torchrun`` every process
+        calls it (each one's random state is kept), the first writes."""
         rngs = distributed.gather(self.rng.bit_generator.state)
         if distributed.rank() > 0:
             return
@@ -402,9 +403,8 @@ class Trainer:
             "validation": self.validation,
             "processes": distributed.world(),
         }
-        torch.save(payload, str(path) + ".tmp")
-        os.replace(str(path) + ".tmp", path)
         state = {
+            "weights": payload["weights"],
             "opt": self.opt.state_dict(),
             "disc": self.disc.state_dict(),
             "disc_opt": self.disc_opt.state_dict(),
@@ -414,6 +414,8 @@ class Trainer:
         }
         torch.save(state, str(path) + ".state.tmp")
         os.replace(str(path) + ".state.tmp", str(path) + ".state")
+        torch.save(payload, str(path) + ".tmp")
+        os.replace(str(path) + ".tmp", path)
 
     def load(self, path: Path, optimiser: bool) -> None:
         payload = torch.load(path, weights_only=False, map_location=self.device)
@@ -424,6 +426,9 @@ class Trainer:
         state_path = Path(str(path) + ".state")
         if optimiser:
             state = torch.load(state_path, weights_only=False, map_location=self.device)
+            if "weights" in state and state["step"] > self.step:  # killed between the writes
+                self.net.load_state_dict(state["weights"])
+                self.step = int(state["step"])
             self.opt.load_state_dict(state["opt"])
             self.disc.load_state_dict(state["disc"])
             self.disc_opt.load_state_dict(state["disc_opt"])
