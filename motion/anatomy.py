@@ -15,20 +15,23 @@ its forearm flexes toward, in the upper arm's own frame); neither finds a frame 
 Bandai's 454 takes but 3 knee frames of one dance take.
 
 Speed: the fastest joint in any Bandai take (a sprint's toes) moves at 6.8 body heights a
-second; :data:`SPEED_LIMIT` is what a time warp may push a result's fastest joint to
-(:func:`capped_warp`), and what a result may not exceed where its content does not
-(:func:`despiked`).
+second; :data:`SPEED_LIMIT` is what a result may not exceed where its content does not
+(:func:`despiked`), and what a time warp slows a result to where a joint would go faster
+(:func:`speed_limited_warp`).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 
 from motion import canonical as C
 from motion import kinematics as K
 from motion import rotations as R
 from motion.errors import MotionError
-from motion.features import FACING_JOINTS
+from motion.features import FACING_JOINTS, time_warp
 from motion.skeleton import Motion
 
 # (hinge joint, its child, hinge axis in the parent's frame, forward-bend sign): the child
@@ -197,13 +200,48 @@ def despiked(
     return motion
 
 
-def capped_warp(factor: float, motion: Motion, limit: float = SPEED_LIMIT) -> float:
-    """A time-warp ``factor`` (> 1 plays faster) lowered so the warped ``motion``'s fastest
-    joint moves at most ``limit`` body heights a second; never below 1 on that account
-    (a warp does not slow down a result that is already fast)."""
-    if factor <= 1.0:
-        return factor
-    peak = peak_speed(motion)
-    if peak * factor <= limit:
-        return factor
-    return max(1.0, limit / peak) if peak > 0 else factor
+@dataclass(frozen=True)
+class Warp:
+    """A time warp: a clip played ``factor`` times as fast overall (> 1 shortens it), at an
+    even rate when ``source`` and ``played`` are None, else along the map they give: at
+    share ``played[i]`` of the warped clip's duration it is at share ``source[i]`` of the
+    clip's (both running from 0 to 1, piecewise linear between), so that a clip at any
+    frame rate, the canonical result or the request's own, is warped alike and keeps its
+    first and last frames (a cycle still loops)."""
+
+    factor: float = 1.0
+    source: np.ndarray | None = None
+    played: np.ndarray | None = None
+
+    @property
+    def identity(self) -> bool:
+        return self.factor == 1.0 and self.source is None
+
+    def apply(self, motion: Motion) -> Motion:
+        """``motion`` played along this warp, at its own frame rate."""
+        if self.source is None:
+            return time_warp(motion, self.factor) if self.factor != 1.0 else motion
+        frames = max(int(round((motion.num_frames - 1) / self.factor)) + 1, 2)
+        share = np.interp(np.linspace(0.0, 1.0, frames), self.played, self.source)
+        return K.resample_at(motion, share * (motion.num_frames - 1), motion.fps)
+
+
+def speed_limited_warp(factor: float, motion: Motion, limit: float = SPEED_LIMIT) -> Warp:
+    """A time warp of the canonical ``motion`` by ``factor``, slowed where a joint would
+    move faster than ``limit`` body heights a second: each step plays at ``factor``, or at
+    ``limit`` over its fastest joint's speed where that is less (below 1 too: the warp
+    slows down a result faster than real mocap), the rate eased in and out over about two
+    frames either side (a minimum over 5 frames, then a Gaussian of 1 frame, never above
+    the step's own limit). Without such a step, the even warp by ``factor``."""
+    if motion.num_frames < 3:
+        return Warp(factor)
+    fastest = joint_speeds(motion).max(axis=1)
+    own = np.where(fastest * factor > limit, limit / np.maximum(fastest, 1e-9), factor)
+    if (own >= factor).all():
+        return Warp(factor)
+    rate = gaussian_filter1d(minimum_filter1d(own, 5, mode="nearest"), 1.0, mode="nearest")
+    rate = np.minimum(rate, own)
+    played = np.concatenate([[0.0], np.cumsum(1.0 / rate)])
+    overall = (motion.num_frames - 1) / played[-1]
+    source = np.linspace(0.0, 1.0, motion.num_frames)
+    return Warp(float(overall), source, played / played[-1])

@@ -37,8 +37,8 @@ import numpy as np
 from motion import bvh, gltf, loops, retarget
 from motion import canonical as C
 from motion import kinematics as K
+from motion.anatomy import Warp
 from motion.errors import MotionError
-from motion.features import time_warp
 from motion.reference import leading_reference_frames, rest_on_canonical
 from motion.root_motion import in_place
 from motion.skeleton import Motion
@@ -273,19 +273,19 @@ def write_result(
     fps: float | None = None,
     like_clip: bool = True,
     fmt: str | None = None,
-    warp: float = 1.0,
+    warp: Warp | None = None,
 ) -> Result:
     """The canonical result back on the clip's own skeleton (its names, offsets, channels
     and, with ``like_clip``, frame rate, frame for frame with ``clip.original``, played
-    ``warp`` times as fast as sent when the result was time-warped, so that the joints the
+    along ``warp`` when the result was time-warped, so that the joints the
     canonical skeleton lacks follow the new timing; else at the canonical motion's timing),
     or left canonical without a clip; at ``fps`` when given; 413 over ``max_frames``.
     Written in ``clip.answer`` (the format ``fmt`` for no clip): BVH text, or the clip's
     glTF or FBX file with the result as its animation."""
     answer = clip.answer if clip is not None else answer_format(None, fmt)
-    if clip is not None and warp != 1.0:
+    if clip is not None and warp is not None and not warp.identity:
         with timer.stage("time_warp"):
-            original = time_warp(clip.original, warp)
+            original = warp.apply(clip.original)
         limits.check_frames(original, settings, what="result")
         clip = dataclasses.replace(clip, original=original)
     if clip is not None:

@@ -22,6 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from motion import features as Fe
+from motion.anatomy import Warp
 from motion.skeleton import Motion
 from service.clips import Clip, Result, write_result
 from service.engines import register_engine
@@ -33,7 +34,7 @@ from service.engines.restyling import (
     pad_mirrored,
     padded_length,
     restyled_motion,
-    speed_capped,
+    speed_limited,
     wrapped,
 )
 from service.errors import NotFound
@@ -57,10 +58,10 @@ class FastJob:
 @dataclass
 class Stylized:
     """The core's result: canonical motion at 30 fps and the time warp applied to it
-    (``finish`` warps the original clip by the same factor)."""
+    (``finish`` warps the original clip alike)."""
 
     motion: Motion
-    warp: float
+    warp: Warp
     warnings: list[str] = field(default_factory=list)
 
 
@@ -137,13 +138,12 @@ class FastEngine(Engine):
         with timer.stage("anatomy"):
             motion = anatomical(motion, cycle, job.content)
         warnings: list[str] = []
-        factor = 1.0
+        warp = Warp()
         if job.time_warp:
-            factor, warnings = speed_capped(self.warp_factor(style), motion)
-        if factor != 1.0:
             with timer.stage("time_warp"):
-                motion = Fe.time_warp(motion, factor)
-        return Stylized(motion, factor, warnings)
+                warp, warnings = speed_limited(self.warp_factor(style), motion)
+                motion = warp.apply(motion)
+        return Stylized(motion, warp, warnings)
 
     def finish(self, job: FastJob, out: Stylized, timer: StageTimer) -> Result:
         style = self.style_of(job.style)

@@ -13,8 +13,8 @@ has in the air kept clear of the floor (``grounding.pin_canonical_feet``); a loo
 cycle, which ran wrapped around (:func:`wrapped`), cut back (:func:`anatomical`); jumps
 no body makes bridged over (faster than real mocap and than the content at that step);
 knees and elbows bent only the way they bend, after every clean-up step. A time warp follows,
-clamped to [``MIN_WARP``, ``MAX_WARP``] and lowered where a joint would move faster than
-real mocap does (:func:`speed_capped`).
+clamped to [``MIN_WARP``, ``MAX_WARP``] and slowed where a joint would move faster than
+real mocap does (:func:`speed_limited`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from scipy.ndimage import gaussian_filter1d
 from motion import contacts as CT
 from motion import features as Fe
 from motion import grounding
-from motion.anatomy import SPEED_LIMIT, capped_warp, despiked, hinged
+from motion.anatomy import SPEED_LIMIT, Warp, despiked, hinged, speed_limited_warp
 from motion.loops import Cycle
 from motion.skeleton import Motion
 from service.metrics import StageTimer
@@ -104,13 +104,14 @@ def anatomical(motion: Motion, cycle: Cycle | None, content: Motion) -> Motion:
     return hinged(despiked(motion, content))
 
 
-def speed_capped(factor: float, motion: Motion) -> tuple[float, list[str]]:
-    """A time-warp ``factor`` lowered so no joint of the warped ``motion`` moves faster than
-    real mocap does (:func:`motion.anatomy.capped_warp`), and a warning when it was."""
-    capped = capped_warp(factor, motion)
-    if capped >= factor:
-        return factor, []
-    return capped, [
-        f"time warp {factor:.3f} lowered to {capped:.3f}: faster, a joint would move over "
-        f"{SPEED_LIMIT:g} body heights a second (real mocap's fastest: 6.8)"
+def speed_limited(factor: float, motion: Motion) -> tuple[Warp, list[str]]:
+    """The time warp by ``factor``, slowed where a joint of the warped ``motion`` would move
+    faster than real mocap does (:func:`motion.anatomy.speed_limited_warp`), and a warning
+    when it was."""
+    warp = speed_limited_warp(factor, motion)
+    if warp.source is None:
+        return warp, []
+    return warp, [
+        f"time warp {factor:.3f} lowered to {warp.factor:.3f}: slowed where a joint would "
+        f"move over {SPEED_LIMIT:g} body heights a second (real mocap's fastest: 6.8)"
     ]

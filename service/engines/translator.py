@@ -31,6 +31,7 @@ import numpy as np
 
 from motion import features as Fe
 from motion import kernels
+from motion.anatomy import Warp
 from motion.keypoints import Keypoints2D
 from motion.skeleton import Motion
 from motion.styles import exaggerated
@@ -46,7 +47,7 @@ from service.engines.restyling import (
     pad_mirrored,
     padded_length,
     restyled_motion,
-    speed_capped,
+    speed_limited,
     wrapped,
 )
 from service.errors import NotFound
@@ -114,11 +115,11 @@ class RegistrationJob:
 
 @dataclass
 class Transfer:
-    """A transfer's canonical result (30 fps, after clean-up and warp), the time-warp factor
-    applied to it (``finish`` warps the original clip by the same factor) and warnings."""
+    """A transfer's canonical result (30 fps, after clean-up and warp), the time warp
+    applied to it (``finish`` warps the original clip alike) and warnings."""
 
     motion: Motion
-    warp: float
+    warp: Warp
     warnings: list[str] = field(default_factory=list)
 
 
@@ -306,7 +307,7 @@ class TranslatorEngine(Engine):
         with timer.stage("anatomy"):
             motion = anatomical(motion, cycle, job.content)
         warnings = list(style.warnings)
-        factor = 1.0
+        warp = Warp()
         if job.time_warp:
             with timer.stage("time_warp"):
                 content_velocity = Fe.encoded_velocity_factor(enc, content.fps)
@@ -316,11 +317,10 @@ class TranslatorEngine(Engine):
                 factor, warned = self.warp_factor(
                     style.velocity, content_velocity, job.strength, speed
                 )
-                factor, capped = speed_capped(factor, motion)
-                warnings += warned + capped
-                if factor != 1.0:
-                    motion = Fe.time_warp(motion, factor)
-        return Transfer(motion, factor, warnings)
+                warp, limited = speed_limited(factor, motion)
+                warnings += warned + limited
+                motion = warp.apply(motion)
+        return Transfer(motion, warp, warnings)
 
     def restyler_input(self, content: Motion) -> np.ndarray:
         """The restyler's standardised input ``(F, CONTROL_CHANNELS)`` for a canonical clip

@@ -182,15 +182,31 @@ def test_content_that_is_fast_itself_is_left_as_fast(bandai):
     assert anatomy.despiked(fast, fast) is fast
 
 
-def test_the_warp_is_capped_at_real_mocap_speeds(bandai):
+def test_the_warp_plays_no_faster_than_real_mocap_and_keeps_both_ends(bandai):
     peak = anatomy.peak_speed(bandai)
     assert 0.5 < peak < anatomy.SPEED_LIMIT  # a walk: about a body height a second
-    assert anatomy.capped_warp(1.2, bandai) == 1.2
-    capped = anatomy.capped_warp(100.0, bandai)
-    assert capped == pytest.approx(anatomy.SPEED_LIMIT / peak)
-    warped = time_warp(bandai, capped)
-    assert anatomy.peak_speed(warped) == pytest.approx(anatomy.SPEED_LIMIT, rel=0.05)
-    assert anatomy.capped_warp(0.7, bandai) == 0.7  # slowing down is never capped
+    even = anatomy.speed_limited_warp(1.2, bandai)
+    assert even == anatomy.Warp(1.2)  # within the limit: the even warp, as before
+    assert even.apply(bandai).num_frames == time_warp(bandai, 1.2).num_frames
+    limited = anatomy.speed_limited_warp(100.0, bandai)
+    warped = limited.apply(bandai)
+    assert anatomy.peak_speed(warped) <= anatomy.SPEED_LIMIT * 1.02
+    assert limited.factor < anatomy.SPEED_LIMIT / peak * 2  # slowed where the walk is fastest
+    np.testing.assert_allclose(warped.lrot[[0, -1]], bandai.lrot[[0, -1]])
+    assert anatomy.speed_limited_warp(0.7, bandai) == anatomy.Warp(0.7)
+
+
+def test_content_faster_than_real_mocap_is_slowed_only_where_it_is(bandai):
+    fast = time_warp(bandai, 2.0 * anatomy.SPEED_LIMIT / anatomy.peak_speed(bandai))
+    fastest = anatomy.joint_speeds(fast).max(axis=1)
+    assert fastest.max() > 1.5 * anatomy.SPEED_LIMIT and (fastest < anatomy.SPEED_LIMIT).any()
+    warp = anatomy.speed_limited_warp(1.0, fast)
+    assert warp.factor < 1.0  # slowed below its own timing, where it is too fast
+    warped = warp.apply(fast)
+    assert anatomy.peak_speed(warped) <= anatomy.SPEED_LIMIT * 1.02
+    # each step's rate: 1 where every joint is slow enough, less where one is not
+    rates = np.diff(warp.source) / np.diff(warp.played) * warp.factor
+    assert rates.max() == pytest.approx(1.0) and rates.min() < 0.6
 
 
 # --- root motion ---------------------------------------------------------------------------
