@@ -100,9 +100,13 @@ LIBRARY ?=
 MODELS ?=
 LIBRARY_ARGS = $(if $(LIBRARY),$(if $(MODELS),--library $(LIBRARY) --models-dir $(MODELS),\
 	$(error LIBRARY needs MODELS, the models folder trained on it)))
-.PHONY: eval-foreign record-evaluations
+.PHONY: eval-foreign game-invariants record-evaluations
 eval-foreign: $(VENV)/.dev
 	$(PY) -m training.eval_foreign $(LIBRARY_ARGS) $(EVAL_FOREIGN_ARGS)
+
+# The game invariants' done-when figures on clips that chose none of their thresholds.
+game-invariants: $(VENV)/.dev
+	$(PY) -m training.game_invariants --json runs/eval/game-invariants.json
 
 # The evaluations write JSON; this one step records their figures in the models' entries.
 record-evaluations: $(VENV)/.dev

@@ -73,6 +73,19 @@ def test_a_walk_cycle_stays_a_cycle_in_every_style_of_both_families(
     assert max(worst.values()) <= 1.5, sorted(worst.items(), key=lambda kv: -kv[1])[:3]
 
 
+def test_a_held_back_authored_cycle_stays_a_cycle_in_every_style(shared_client, styles):
+    """Bandai's dash (an open cycle, its travel on joint_Root): no Bandai cycle chose the
+    loop tolerances (``python -m training.game_invariants`` measures all four)."""
+    dash = bvh.load(data_path("bandai", "dataset-1", "dataset-1_dash_normal_001.bvh"))
+    worst = {}
+    for family, names in styles.items():
+        for style in names:
+            body = restyle(shared_client, family, dash, style)
+            assert body["loop"] is True, (family, style)
+            worst[(family, style)] = loop_jump_in_steps(body["motion"])
+    assert max(worst.values()) <= 1.5, sorted(worst.items(), key=lambda kv: -kv[1])[:3]
+
+
 @pytest.mark.parametrize("family", ENDPOINTS)
 def test_a_cycle_loops_without_the_time_warp_and_keeps_its_frames(
     shared_client, family, mixamo_walk

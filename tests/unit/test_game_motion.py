@@ -80,12 +80,32 @@ def test_cropping_spreads_what_a_processed_cycle_lost_at_its_ends(walk):
     assert jump < 1e-9 * H
 
 
+@pytest.mark.parametrize(
+    ("take", "closed"),
+    [("dash_normal_001", False), ("run_normal_001", True), ("walk-back_normal_001", True),
+     ("walk_normal_002", True)],
+)  # fmt: skip
+def test_bandais_authored_cycles_are_found(take, closed):
+    """Held back: no Bandai cycle chose the tolerances (their travel is on joint_Root)."""
+    motion = bvh.load(data_path("bandai", "dataset-1", f"dataset-1_{take}.bvh"))
+    loop = loops.detect(canonical(motion, None))
+    assert loop is not None and loop.closed == closed
+
+
 # --- reference frames ----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("take", "count"), [("02_01", 1), ("07_12", 2), ("09_01", 1)])
-def test_cmu_t_pose_frames_are_found(take, count):
-    motion = bvh.load(data_path("cmu-31", f"{take}.bvh"))
+@pytest.mark.parametrize(
+    ("parts", "count"),
+    [
+        (("cmu-31", "02_01.bvh"), 1),
+        (("cmu-31", "07_12.bvh"), 2),
+        (("cmu-31", "09_01.bvh"), 1),
+        (("cmu-dance-43", "05_20.bvh"), 1),  # held back: another rig, not among those chosen on
+    ],
+)
+def test_cmu_t_pose_frames_are_found(parts, count):
+    motion = bvh.load(data_path(*parts))
     rig = retarget.make_rig(motion.skeleton, motion)
     full = retarget.to_canonical(motion, rig, fps=None)
     assert reference.leading_reference_frames(full, reference.rest_on_canonical(rig, 120)) == count
