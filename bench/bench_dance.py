@@ -38,11 +38,11 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
 
     settings = Settings(max_audio_seconds=max(args.seconds + 1, Settings().max_audio_seconds))
-    manifest = load_manifest(settings.models_dir)
-    entry = next((m for m in manifest.models if m.family == "dance"), None)
+    models = settings.models_dir[0]  # the first model folder: the shipped one by default
+    entry = next((m for m in load_manifest(models).models if m.family == "dance"), None)
     if entry is None:
-        raise SystemExit(f"no dance model in {settings.models_dir}/manifest.json")
-    engine = DanceEngine(entry, settings.models_dir, settings)
+        raise SystemExit(f"no dance model in {models}/manifest.json")
+    engine = DanceEngine(entry, models, settings)
     engine.load()
     data = encoded(song(args.seconds), args.format.upper())
 

@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
 
     settings = Settings()
-    manifest = load_manifest(settings.models_dir)
+    manifest = load_manifest(settings.models_dir[0])
     entry = next(m for m in manifest.models if m.family == "fast")
     styles = entry.extra["styles"]
     style = args.style or sorted(styles)[0]
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> dict:
     threads = settings.intra_op_threads
     torch.set_num_threads(threads)
 
-    session = create_session(settings.models_dir / entry.graphs[graph].file, threads)
+    session = create_session(settings.models_dir[0] / entry.graphs[graph].file, threads)
     ckpt_dir = FC.CHECKPOINTS
     net = FC.StyleNet().eval()
     if (ckpt_dir / f"style_{style}.pt").exists():
@@ -147,7 +147,7 @@ def time_engine(entry, settings, style: str, repeats: int) -> list[dict]:
     from service.engines.fast import FastEngine, FastJob
     from service.metrics import StageTimer
 
-    engine = FastEngine(entry, settings.models_dir, settings)
+    engine = FastEngine(entry, settings.models_dir[0], settings)
     engine.load()
     motion = bvh.load(REPO / "tests" / "data" / "cmu_02_01_walk_30fps.bvh")
     canon = retarget.to_canonical(motion, retarget.make_rig(motion.skeleton, motion))

@@ -34,6 +34,7 @@ import argparse
 import http.client
 import json
 import math
+import os
 import subprocess
 import sys
 import threading
@@ -346,15 +347,17 @@ def main(argv: list[str] | None = None) -> dict:
 
     note = sys.stderr if args.json else sys.stdout  # keep --json output pure JSON
     settings = Settings()
-    manifest = load_manifest(settings.models_dir)
-    shipped = {m.family for m in manifest.models}
+    entries = [m for folder in settings.models_dir for m in load_manifest(folder).models]
+    shipped = {m.family for m in entries}
     skipped = {}
     families = []
     for family in args.families:
         if family in shipped:
             families.append(family)
         else:
-            skipped[family] = f"no {family} model in {settings.models_dir}/manifest.json"
+            skipped[family] = (
+                f"no {family} model in {os.pathsep.join(map(str, settings.models_dir))}"
+            )
             print(f"{family}: skipped, {skipped[family]}", file=note)
 
     process, url = (None, args.url) if args.url else _start_server(1)
@@ -413,7 +416,7 @@ def main(argv: list[str] | None = None) -> dict:
         "intra_op_threads": settings.intra_op_threads,
         "max_concurrent_inferences": settings.max_concurrent_inferences,
         "repeats": args.repeats,
-        "models": {m.family: f"{m.name}/{m.version}" for m in manifest.models},
+        "models": {m.family: f"{m.name}/{m.version}" for m in entries},
         "styles": styles,
         "latency": rows,
         "growth": growth(rows),

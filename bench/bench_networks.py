@@ -86,7 +86,7 @@ def translator_rows(entry, settings, lengths, repeats: int, threads: int) -> tup
         torch.manual_seed(0)
         net = Translator(config).eval()
     sessions = {
-        name: create_session(settings.models_dir / entry.graphs[name].file, threads)
+        name: create_session(settings.models_dir[0] / entry.graphs[name].file, threads)
         for name in ("style3d", "restyler")
     }
     window = int(entry.extra["window"])
@@ -150,7 +150,7 @@ def dance_rows(entry, settings, lengths, repeats: int, threads: int) -> tuple[li
     sessions = None
     if entry is not None:
         sessions = {
-            name: create_session(settings.models_dir / entry.graphs[name].file, threads)
+            name: create_session(settings.models_dir[0] / entry.graphs[name].file, threads)
             for name in ("audio", "step")
         }
         code_dim = int(dict((t.name, t.shape) for t in entry.graphs["step"].inputs)["code"][1])
@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> dict:
     note = sys.stderr if args.json else sys.stdout  # keep --json output pure JSON
 
     settings = Settings()
-    manifest = load_manifest(settings.models_dir)
+    manifest = load_manifest(settings.models_dir[0])
     entries = {m.family: m for m in manifest.models}
     threads = settings.intra_op_threads
     torch.set_num_threads(threads)
@@ -257,17 +257,17 @@ def main(argv: list[str] | None = None) -> dict:
             )
             rows += found
         else:
-            skipped["translator"] = f"no translator model in {settings.models_dir}/manifest.json"
+            skipped["translator"] = f"no translator model in {settings.models_dir[0]}/manifest.json"
     if "dance" in args.families:
         entry = entries.get("dance")
         if entry is None and not TD.CHECKPOINT.exists():
             skipped["dance"] = (
-                f"no dance model in {settings.models_dir}/manifest.json and no {TD.CHECKPOINT}"
+                f"no dance model in {settings.models_dir[0]}/manifest.json and no {TD.CHECKPOINT}"
             )
         else:
             if entry is None:
                 print(
-                    f"dance: no model in {settings.models_dir}/manifest.json yet: torch only",
+                    f"dance: no model in {settings.models_dir[0]}/manifest.json yet: torch only",
                     file=note,
                 )
             found, sources["dance"] = dance_rows(

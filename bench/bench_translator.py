@@ -57,9 +57,9 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
 
     settings = Settings()
-    manifest = load_manifest(settings.models_dir)
-    entry = next(m for m in manifest.models if m.family == "translator")
-    engine = TranslatorEngine(entry, settings.models_dir, settings)
+    models = settings.models_dir[0]  # the first model folder: the shipped one by default
+    entry = next(m for m in load_manifest(models).models if m.family == "translator")
+    engine = TranslatorEngine(entry, models, settings)
     engine.load()
     name = args.style_name or engine.style_names[0]
     what, data = content_clip(args.frames, data_dir())

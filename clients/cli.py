@@ -316,7 +316,7 @@ def parser() -> argparse.ArgumentParser:
     transfer = commands.add_parser("transfer", help="the translator: a style by name, mix or clip")
     common(transfer, "BVH, GLB or FBX")
     style = transfer.add_mutually_exclusive_group(required=True)
-    style.add_argument("--style", help="style name (GET /v1/styles)")
+    style.add_argument("--style", help="style name or library:style (GET /v1/styles)")
     style.add_argument(
         "--mix", help='styles mixed, JSON name -> weight: \'{"happy": 0.7, "old": 0.3}\''
     )
@@ -326,7 +326,9 @@ def parser() -> argparse.ArgumentParser:
     game(transfer)
     stylize = commands.add_parser("stylize", help="the fast per-style networks")
     common(stylize, "BVH, GLB or FBX")
-    stylize.add_argument("--style", required=True, help="style name (GET /v1/styles)")
+    stylize.add_argument(
+        "--style", required=True, help="style name or library:style (GET /v1/styles)"
+    )
     game(stylize)
     dance = commands.add_parser("dance", help="a dance for each song")
     common(dance, "audio (wav, flac, ogg, mp3)")

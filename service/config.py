@@ -9,10 +9,10 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, field_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 REPO_MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 
@@ -48,7 +48,12 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
     workers: int = Field(1, ge=1, description="uvicorn worker processes")
-    models_dir: Path = Field(REPO_MODELS_DIR, description="folder holding manifest.json")
+    models_dir: Annotated[tuple[Path, ...], NoDecode] = Field(
+        (REPO_MODELS_DIR,),
+        description="model folders, each holding a manifest.json: one, or several separated "
+        f"by {os.pathsep!r} (a studio's models beside the shipped ones); the first folder's "
+        "model takes the requests that name no style",
+    )
 
     max_upload_bytes: int = Field(20 * 1024 * 1024, ge=1, description="request body limit")
     max_frames: int = Field(20_000, ge=1, description="frames per clip, in or out")
@@ -119,6 +124,18 @@ class Settings(BaseSettings):
     debug_routes: bool = Field(
         False, description="serve /_debug/* (slow requests for shutdown tests); never in production"
     )
+
+    @field_validator("models_dir", mode="before")
+    @classmethod
+    def _model_folders(cls, value: object) -> object:
+        # MOTION_MODELS_DIR=models:/srv/studio, as PATH lists folders; a list as it is
+        if isinstance(value, str):
+            value = [part for part in value.split(os.pathsep) if part.strip()]
+        elif isinstance(value, os.PathLike):
+            value = [value]
+        if isinstance(value, list | tuple) and not value:
+            raise ValueError("give at least one model folder")
+        return value
 
     @field_validator("api_keys_file", "key_state_dir", mode="before")
     @classmethod

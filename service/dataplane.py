@@ -2,7 +2,8 @@
 
 A route reads its HTTP fields into a request of :mod:`service.requests` and hands it here;
 the data plane looks up the engine of the family that takes it (one lookup, one readiness
-rule: :meth:`ModelRegistry.engine_for`), runs ``engine.infer`` (prepare -> predict ->
+rule: :meth:`ModelRegistry.resolve`, which also picks among several models of a family by
+the style names asked for), runs ``engine.infer`` (prepare -> predict ->
 finish) in the inference pool (:mod:`service.inference`: queue, slots, timeout), times its
 stages and counts the frames it made; the route turns the result into an HTTP answer.
 
@@ -18,10 +19,10 @@ from typing import Any
 from service import metrics
 from service.errors import Conflict, NotFound
 from service.inference import InferenceRunner
+from service.manifest import FAMILIES
 from service.metrics import StageTimer
 from service.registered_styles import StyleStore
 from service.registry import ModelRegistry
-from service.requests import StyleCodeRequest, StyleSource
 
 
 class DataPlane:
@@ -39,7 +40,7 @@ class DataPlane:
         """``request`` through the engine of ``family`` that takes it, in the inference pool;
         the result carries the model and the stage timings. Frames made are counted under
         ``endpoint`` (the route template) and the model."""
-        engine = self.registry.engine_for(family, request)
+        engine, request = self.registry.resolve(family, request)
         timer = StageTimer(engine.name)
         result = await self.runner.run(engine.infer, request, timer)
         result.model = (engine.name, engine.version)
@@ -52,15 +53,13 @@ class DataPlane:
     # --- style names across the families ------------------------------------------------------
 
     def shipped_family(self, name: str) -> str | None:
-        """The family that ships a style (or a translator alias) named ``name``, or None."""
+        """The family that ships a style (or another name of one) named ``name``, in any
+        model, or None."""
         if name in self.styles:
             return None
-        for family, styles in self.registry.styles().items():
-            if any(s["name"] == name and not s.get("registered") for s in styles):
+        for family in FAMILIES:
+            if any(e.style_of(name) for e in self.registry.by_family(family)):
                 return family
-        probe = StyleCodeRequest(StyleSource("style_name", name=name))
-        if any(engine.accepts(probe) for engine in self.registry.by_family("translator")):
-            return "translator"  # another name of a shipped style
         return None
 
     def check_new_style(self, name: str) -> None:

@@ -113,6 +113,17 @@ class Manifest(_Strict):
         return self
 
 
+def library_of(entry: ModelEntry) -> str:
+    """The library ``entry``'s model learned from: ``extra.library`` (``motion-style-train``
+    writes it), else its name without the family's prefix (``translator-bandai``:
+    ``bandai``). ``library:style`` names a style of this model in a request."""
+    library = entry.extra.get("library")
+    if isinstance(library, str) and library:
+        return library
+    prefix = f"{entry.family}-"
+    return entry.name[len(prefix) :] if entry.name.startswith(prefix) else entry.name
+
+
 def load_manifest(models_dir: Path) -> Manifest:
     """Read and validate ``models_dir/manifest.json``; :class:`ManifestError` says what is wrong."""
     path = Path(models_dir) / MANIFEST_NAME

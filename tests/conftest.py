@@ -48,7 +48,7 @@ def recorded_evaluation(record, report: dict, tmp_path: Path) -> dict:
     from service.manifest import load_manifest
 
     models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
+    shutil.copytree(Settings().models_dir[0], models)
     record(report, models)
     entry = next(m for m in load_manifest(models).models if m.name == report["model_name"])
     return entry.metrics["evaluation"]

@@ -74,8 +74,9 @@ def load_engine():
     from service.manifest import load_manifest
 
     settings = Settings(max_audio_seconds=TEN_MINUTES + 60)
-    entry = next(m for m in load_manifest(settings.models_dir).models if m.family == "dance")
-    engine = DanceEngine(entry, settings.models_dir, settings)
+    models = settings.models_dir[0]  # the first model folder: the shipped one by default
+    entry = next(m for m in load_manifest(models).models if m.family == "dance")
+    engine = DanceEngine(entry, models, settings)
     engine.load()
     return engine, entry
 

@@ -266,9 +266,9 @@ def load_engine(family: str, models_dir: Path | None = None):
     from service.manifest import load_manifest
 
     settings = Settings() if models_dir is None else Settings(models_dir=models_dir)
-    manifest = load_manifest(settings.models_dir)
-    entry = next(m for m in manifest.models if m.family == family)
-    return engine_of(entry, settings.models_dir), entry, settings.models_dir
+    models = settings.models_dir[0]  # the first model folder: the shipped one by default
+    entry = next(m for m in load_manifest(models).models if m.family == family)
+    return engine_of(entry, models), entry, models
 
 
 def engine_of(entry, models_dir: Path):
@@ -280,7 +280,7 @@ def engine_of(entry, models_dir: Path):
 
     settings = Settings(models_dir=models_dir)
     cls = {"translator": TranslatorEngine, "fast": FastEngine}[entry.family]
-    engine = cls(entry, settings.models_dir, settings)
+    engine = cls(entry, Path(models_dir), settings)
     engine.load()
     return engine
 

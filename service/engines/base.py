@@ -11,8 +11,9 @@ family's requests in three steps (KServe's preprocess, predict, postprocess), wh
 - :meth:`Engine.predict`: run the networks, and nothing else (so a change of graphs is local);
 - :meth:`Engine.finish`: post-process, back onto the request's skeleton, write.
 
-:meth:`Engine.accepts` says whether it can take a request (e.g. offers its style) and
-:meth:`Engine.refusal` the 404 when no engine of the family can.
+:meth:`Engine.offers` says whether it offers a style of a name (the registry picks the
+model a request's style names belong to), :meth:`Engine.accepts` whether it can take a
+request, and :meth:`Engine.refusal` the 404 when no engine of the family can.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import numpy as np
 
 from service.config import Settings
 from service.errors import NotFound
-from service.manifest import GraphSpec, ModelEntry
+from service.manifest import GraphSpec, ModelEntry, library_of
 from service.metrics import StageTimer
 from service.registered_styles import StyleStore
 
@@ -139,6 +140,11 @@ class Engine:
     def version(self) -> str:
         return self.entry.version
 
+    @property
+    def library(self) -> str:
+        """The library it learned from: ``library:style`` names its styles."""
+        return library_of(self.entry)
+
     def path(self, relative: str) -> Path:
         """A file of this bundle (as listed in the manifest) on disk."""
         return self.models_dir / relative
@@ -195,8 +201,16 @@ class Engine:
         return self.sessions[graph].run(None, feeds)
 
     def styles(self) -> list[dict[str, Any]]:
-        """Styles this model offers: ``[{"name": ..., "clips": ...}, ...]`` (clips optional)."""
+        """Styles this model ships: ``[{"name": ..., "clips": ...}, ...]`` (clips optional)."""
         return []
+
+    def style_of(self, name: str) -> str | None:
+        """The shipped style ``name`` is, or is another name of; None if none."""
+        return name if any(style["name"] == name for style in self.styles()) else None
+
+    def offers(self, name: str) -> bool:
+        """Whether a request may name the style ``name`` (a bare name) of this model."""
+        return self.style_of(name) is not None
 
     # --- requests -------------------------------------------------------------------------
 

@@ -100,7 +100,7 @@ class FastEngine(Engine):
         return name if name in self.style_info else None
 
     def accepts(self, request: StylizeRequest) -> bool:
-        return self.style_of(request.style_name) is not None
+        return self.offers(request.style_name)
 
     def refusal(self, request: StylizeRequest) -> NotFound:
         return self._unknown(request.style_name)

@@ -180,23 +180,30 @@ class TranslatorEngine(Engine):
                 "speed": round(self.speed[i], 4),
             }
             for i, name in sorted(enumerate(self.style_names), key=lambda item: item[1])
-        ] + [style.listing() for style in self.registered.all()]
+        ]  # the registered ones: the registry lists them once, beside every model's
 
     def row(self, name: str) -> int | None:
         """The style table's row of ``name`` or of the style it is another name of."""
         return self.index.get(self.aliases.get(name, name))
 
-    def known(self, name: str) -> bool:
-        """A shipped style (or another name of one) or a registered one."""
-        return self.row(name) is not None or name in self.registered
+    def style_of(self, name: str) -> str | None:
+        i = self.row(name)
+        return None if i is None else self.style_names[i]
+
+    def offers(self, name: str) -> bool:
+        """A shipped style (or another name of one), or one registered with this model."""
+        if self.row(name) is not None:
+            return True
+        style = self.registered.get(name)
+        return style is not None and style.model == self.name
 
     def accepts(self, request: TranslatorRequest) -> bool:
         if isinstance(request, RegisterStyleRequest):
             return True
-        return all(self.known(name) for name in request.style.names())
+        return all(self.offers(name) for name in request.style.names())
 
     def refusal(self, request: TransferRequest | StyleCodeRequest) -> NotFound:
-        unknown = next(n for n in request.style.names() if not self.known(n))
+        unknown = next(n for n in request.style.names() if not self.offers(n))
         return self._unknown(unknown)
 
     def _unknown(self, name: str) -> NotFound:

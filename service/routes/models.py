@@ -1,4 +1,5 @@
-"""``GET /v1/models``: the manifest, each model's load status, and the licence note."""
+"""``GET /v1/models``: every model folder's manifest, each model's library, licence and load
+status, and the licence note."""
 
 from __future__ import annotations
 
@@ -9,19 +10,22 @@ from pydantic import BaseModel
 
 from service.deps import RegistryDep
 from service.errors import NotReady
-from service.manifest import ModelEntry
+from service.manifest import SCHEMA_VERSION, ModelEntry, library_of
 from service.problems import problem_responses
 
 router = APIRouter(tags=["models"])
 
 LICENCE_NOTE = (
-    "The shipped models are trained on data under CC BY-NC 4.0 (Bandai Namco motion), "
-    "research-only terms, or no licence for reuse (music). They are provided for research "
-    "and evaluation only, not for commercial use; see each model's training_data and licence."
+    "Each model states its licence and training data. The shipped models (libraries bandai "
+    "and dwm) are trained on data under CC BY-NC 4.0 (Bandai Namco motion), research-only "
+    "terms, or no licence for reuse (music): they are provided for research and evaluation "
+    "only, not for commercial use. A studio's models (motion-style-train) carry the licence "
+    "the studio declared for its library."
 )
 
 
 class ModelInfo(ModelEntry):
+    library: str  # what ``library:style`` names (service.style_names)
     status: Literal["pending", "loading", "ready", "failed"]
     loaded: bool
     error: str | None = None
@@ -40,24 +44,24 @@ class ModelsResponse(BaseModel):
     responses=problem_responses(503),
 )
 async def list_models(registry: RegistryDep) -> ModelsResponse:
-    manifest = registry.manifest
-    if manifest is None:
+    if len(registry.manifests) < len(registry.models_dirs):
         if registry.state == "failed":
             raise NotReady("; ".join(registry.reasons()), state=registry.state)
         raise NotReady("the manifest is being read", headers={"Retry-After": "1"})
     models = []
-    for entry in manifest.models:
+    for entry in registry.entries:
         status = registry.model_status(entry.name)
         models.append(
             ModelInfo(
                 **entry.model_dump(),
+                library=library_of(entry),
                 status=status,
                 loaded=status == "ready",
                 error=registry.errors.get(entry.name),
             )
         )
     return ModelsResponse(
-        schema_version=manifest.schema_version,
+        schema_version=SCHEMA_VERSION,
         state=registry.state,
         licence_note=LICENCE_NOTE,
         models=models,

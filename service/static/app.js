@@ -380,10 +380,17 @@ function familyOf(group) {
   return group === 'fast' ? 'fast' : 'translator';
 }
 
+// A style as a request names it: bare, or library:style where two models of its family
+// offer the name (the service refuses the bare name then as ambiguous)
+function requestName(style, family) {
+  const sharing = (state.styles[family] || []).filter((s) => s.name === style.name);
+  return sharing.length > 1 && style.qualified_name ? style.qualified_name : style.name;
+}
+
 function styleNames() {
   const names = new Set();
   for (const family of ['translator', 'fast']) {
-    for (const style of state.styles[family] || []) names.add(style.name);
+    for (const style of state.styles[family] || []) names.add(requestName(style, family));
   }
   return [...names].sort();
 }
@@ -406,9 +413,10 @@ async function loadStyles() {
     optgroup.label = group.label;
     optgroup.dataset.group = group.key;
     for (const style of styles) {
+      const name = requestName(style, familyOf(group.key));
       const option = new Option(
-        style.clips ? `${style.name} (${style.clips} clip${style.clips === 1 ? "" : "s"})` : style.name,
-        style.name,
+        style.clips ? `${name} (${style.clips} clip${style.clips === 1 ? "" : "s"})` : name,
+        name,
       );
       option.dataset.family = familyOf(group.key);
       optgroup.appendChild(option);

@@ -52,7 +52,7 @@ def test_settings_come_from_motion_variables(monkeypatch, tmp_path):
     monkeypatch.setenv("MOTION_MODELS_DIR", str(tmp_path))
     settings = Settings()
     assert settings.max_frames == 123
-    assert settings.models_dir == tmp_path
+    assert settings.models_dir == (tmp_path,)
 
 
 def test_threads_per_worker_never_exceed_the_cores():

@@ -18,7 +18,7 @@ from service.manifest import load_manifest
 from tests.rigs import FIXTURE
 from training.songs import encoded, song
 
-SHIPPED = Settings().models_dir
+SHIPPED = Settings().models_dir[0]
 pytestmark = pytest.mark.skipif(
     not any(m.family == "dance" for m in load_manifest(SHIPPED).models),
     reason=f"no dance model shipped in {SHIPPED}",

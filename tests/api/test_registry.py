@@ -168,8 +168,15 @@ def test_an_engine_factory_serves_its_family(make_client, tmp_path):
     assert styles == {
         "translator": [],
         "fast": [
-            {"name": "happy", "model": "tiny", "clips": 3},
-            {"name": "sad", "model": "tiny", "clips": 3},
+            {
+                "name": name,
+                "model": "tiny",
+                "clips": 3,
+                "library": "tiny",
+                "licence": "test only",
+                "qualified_name": f"tiny:{name}",
+            }
+            for name in ("happy", "sad")
         ],
         "dance": [],
     }

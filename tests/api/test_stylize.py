@@ -16,7 +16,7 @@ from tests.conftest import data_path
 
 def shipped_fast_styles() -> list[str]:
     try:
-        doc = json.loads((Settings().models_dir / "manifest.json").read_text())
+        doc = json.loads((Settings().models_dir[0] / "manifest.json").read_text())
     except (OSError, ValueError):
         return []
     return sorted(
@@ -169,7 +169,7 @@ def test_too_many_frames_is_413(make_client, walk):
 
 
 def fast_speeds() -> dict[str, float]:
-    doc = json.loads((Settings().models_dir / "manifest.json").read_text())
+    doc = json.loads((Settings().models_dir[0] / "manifest.json").read_text())
     entry = next(m for m in doc["models"] if m["family"] == "fast")
     return {name: info["speed"] for name, info in entry["extra"]["styles"].items()}
 

@@ -72,7 +72,7 @@ def speeds() -> dict[str, float]:
 
 def style_gap() -> float:
     """The smallest gap between learned codes (the engine's; named codes lie further out)."""
-    with np.load(Settings().models_dir / ENTRY["extra"]["styles_file"]) as table:
+    with np.load(Settings().models_dir[0] / ENTRY["extra"]["styles_file"]) as table:
         codes = table["codes"]
     gaps = np.linalg.norm(codes[:, None] - codes[None], axis=-1)
     return float(gaps[~np.eye(len(codes), dtype=bool)].min())

@@ -95,8 +95,8 @@ def engine() -> TranslatorEngine:
     from service.manifest import load_manifest
 
     settings = Settings()
-    entry = next(m for m in load_manifest(settings.models_dir).models if m.name == ENTRY["name"])
-    engine = TranslatorEngine(entry, settings.models_dir, settings)
+    entry = next(m for m in load_manifest(settings.models_dir[0]).models if m.name == ENTRY["name"])
+    engine = TranslatorEngine(entry, settings.models_dir[0], settings)
     engine.load()
     return engine
 

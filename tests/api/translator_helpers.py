@@ -13,7 +13,7 @@ from tests.conftest import data_path
 
 
 def shipped_translator() -> dict | None:
-    models_dir = Settings().models_dir
+    models_dir = Settings().models_dir[0]
     if not (models_dir / "translator").exists():
         return None
     try:

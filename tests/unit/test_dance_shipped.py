@@ -14,7 +14,7 @@ from service.manifest import load_manifest
 
 torch = pytest.importorskip("torch")
 
-MODELS = Settings().models_dir
+MODELS = Settings().models_dir[0]
 
 
 def shipped_entry():

@@ -289,7 +289,7 @@ def test_evaluation_runs_end_to_end_on_the_shipped_models(tmp_path, monkeypatch)
     assert clips == [120, 80, 80]  # dataset-2's takes only: 40 per style
     assert "test half" in FR.markdown(report)
     models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
+    shutil.copytree(Settings().models_dir[0], models)
     EV.record_foreign(report, models)
     for family, figures in report["families"].items():
         entry = next(m for m in load_manifest(models).models if m.name == figures["model_name"])

@@ -31,7 +31,7 @@ def test_the_shipped_smoothing_is_the_one_the_rule_gives(family, tmp_path):
 
     data_path("bandai")  # skips without the shared data
     models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
+    shutil.copytree(Settings().models_dir[0], models)
     entry = next(m for m in load_manifest(models).models if m.family == family)
     sigma = OS.choose(family, models)
     assert sigma == entry.extra["output_smoothing"]

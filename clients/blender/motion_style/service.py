@@ -43,14 +43,26 @@ def _open(request: urllib.request.Request, timeout: float) -> bytes:
 
 
 def styles(server: str, api_key: str = "", timeout: float = 10.0) -> list[str]:
-    """Names of the translator's styles (``GET /v1/styles``), shipped and registered."""
+    """Names of the translator's styles (``GET /v1/styles``), shipped and registered, as a
+    request names them: ``library:style`` where two models offer one name."""
     request = _with_key(urllib.request.Request(server.rstrip("/") + "/v1/styles"), api_key)
     body = _open(request, timeout)
     try:
-        listing = json.loads(body)
-        return [s["name"] for s in listing.get("translator", [])]
+        return listing_of(json.loads(body).get("translator", []))
     except (ValueError, KeyError, TypeError, AttributeError):
         raise ServiceError("GET /v1/styles did not answer with a style list") from None
+
+
+def listing_of(styles: list[dict]) -> list[str]:
+    """The names to send for a family's styles: each bare, or ``qualified_name`` where
+    several models share the name (a bare one would be refused as ambiguous)."""
+    counts: dict[str, int] = {}
+    for style in styles:
+        counts[style["name"]] = counts.get(style["name"], 0) + 1
+    return [
+        style.get("qualified_name", style["name"]) if counts[style["name"]] > 1 else style["name"]
+        for style in styles
+    ]
 
 
 def transfer(
