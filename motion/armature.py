@@ -11,9 +11,10 @@ turned Y up (Blender's Z up: ``(x, y, z) -> (x, z, -y)``, what Blender's glTF ex
 does), and leaf bones end at their tails (End Sites). An armature with several root bones
 gets the armature object itself as its root joint (named after the object).
 
-:func:`to_basis` inverts it: a motion on the armature's joints -> each bone's
-``matrix_basis`` (location and quaternion, w first as Blender keys them), for bones that
-inherit rotation and scale (Blender's defaults, which its FBX importer keeps).
+:func:`pose_matrices` inverts it: a motion on the armature's joints -> each bone's
+armature-space matrix; :func:`to_basis`, each bone's ``matrix_basis`` (location and
+quaternion, w first as Blender keys them), for bones that inherit rotation and scale
+(Blender's defaults, which its FBX importer keeps).
 """
 
 from __future__ import annotations
@@ -144,10 +145,10 @@ def to_motion(
     return Motion(skel, float(fps), rot.normalize(lrot), lpos)
 
 
-def to_basis(armature: Armature, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """``(location (F, J, 3), rotation (F, J, 4) w x y z)``: each bone's ``matrix_basis``
-    that plays ``motion`` (on the armature's joints, as :func:`to_motion` reads them) with
-    the object left at its rest matrix."""
+def pose_matrices(armature: Armature, motion: Motion) -> np.ndarray:
+    """Each bone's armature-space matrix ``(F, J, 4, 4)`` (Blender's ``pose.bones[...].matrix``)
+    that plays ``motion`` (on the armature's joints, as :func:`to_motion` reads them) with the
+    object left at its rest matrix."""
     names = armature.joint_names()
     if tuple(motion.skeleton.names) != names:
         raise MotionError("the motion is not on the armature's joints", kind="unusable")
@@ -161,8 +162,14 @@ def to_basis(armature: Armature, motion: Motion) -> tuple[np.ndarray, np.ndarray
     pose[..., :3, 3] = ((heads @ Z_UP_TO_Y_UP) - armature.matrix_world[:3, 3]) @ obj_rot
     pose[..., :3, 3] /= obj_scale
     pose[..., 3, 3] = 1.0
-    if armature.object_root:
-        pose = pose[:, 1:]
+    return pose[:, 1:] if armature.object_root else pose
+
+
+def to_basis(armature: Armature, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """``(location (F, J, 3), rotation (F, J, 4) w x y z)``: each bone's ``matrix_basis``
+    that plays ``motion`` (on the armature's joints, as :func:`to_motion` reads them) with
+    the object left at its rest matrix."""
+    pose = pose_matrices(armature, motion)
     rest = armature.rest
     parents = armature.parents
     # basis = rest_b^-1 rest_p pose_p^-1 pose_b (a root bone: rest_b^-1 pose_b)

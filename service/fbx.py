@@ -30,7 +30,10 @@ import time
 from multiprocessing.connection import Connection
 from pathlib import Path
 
+import numpy as np
+
 from motion import armature as A
+from motion import fbx_rekey
 from motion.errors import MotionError
 from motion.skeleton import Motion
 from service.errors import Timeout, UnsupportedMediaType
@@ -206,16 +209,32 @@ class FbxFile:
     """A read FBX file: ``motion`` (its armature's animation) and :meth:`write`."""
 
     def __init__(
-        self, data: bytes, armature: A.Armature, motion: Motion, workers: int, timeout: float
+        self,
+        data: bytes,
+        armature: A.Armature,
+        motion: Motion,
+        workers: int,
+        timeout: float,
+        first_pose: np.ndarray | None = None,
     ) -> None:
         self.data = data
         self.armature = armature
         self.motion = motion
+        self.first_pose = first_pose  # the bones as Blender read the first frame (animated files)
         self._workers = workers
         self._timeout = timeout
 
     def write(self, motion: Motion) -> bytes:
-        """FBX bytes of this file with ``motion`` (on its joints) as its armature's action."""
+        """FBX bytes of this file with ``motion`` (on its joints) as its armature's action:
+        keyed straight into the file's bytes where :mod:`motion.fbx_rekey` can, else
+        exported by Blender."""
+        if self.first_pose is not None:
+            plan = fbx_rekey.plan(
+                self.data, self.armature.names, self.armature.parents, self.first_pose
+            )
+            if isinstance(plan, fbx_rekey.Plan):
+                return plan.write(A.pose_matrices(self.armature, motion), float(motion.fps))
+            logger.info("FBX answer exported by Blender: %s", plan)
         location, rotation = A.to_basis(self.armature, motion)
         pool = _require_pool(self._workers)
         return pool.call(
@@ -241,4 +260,7 @@ def read(
     )
     armature = A.Armature(**answer["armature"])
     motion = A.to_motion(armature, answer["bones"], answer["objects"], answer["fps"])
-    return FbxFile(data, armature, motion, workers, timeout)
+    # a file whose armature object moves, or has no animation, is written by Blender
+    still = answer["animated"] and answer["objects"] is None
+    first = np.asarray(answer["bones"][0], dtype=np.float64) if still else None
+    return FbxFile(data, armature, motion, workers, timeout, first)

@@ -164,7 +164,7 @@ def read(data: bytes, max_frames: int, rest_if_unanimated: bool = False) -> dict
             raise MotionError("the FBX file has no animation of its armature", kind="unusable")
         armature["matrix_world"] = _matrix(arm.matrix_world)
         rest = armature["rest"][None].astype(np.float32)
-        return {"armature": armature, "bones": rest, "objects": None, "fps": fps}
+        return {"armature": armature, "bones": rest, "objects": None, "fps": fps, "animated": False}
     start, end = _State.frame_range
     frames = end - start + 1
     if frames > max_frames:
@@ -198,6 +198,7 @@ def read(data: bytes, max_frames: int, rest_if_unanimated: bool = False) -> dict
         "bones": matrices,
         "objects": objects if moved else None,
         "fps": fps,
+        "animated": True,
     }
 
 
