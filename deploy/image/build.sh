@@ -11,6 +11,9 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 
 IMAGE=${IMAGE:-motion-style:latest}
+# pyproject.toml's extras in the image: `make image-fbx` builds motion-style:fbx with
+# EXTRAS="serve fbx" (Blender as a Python module, for FBX in and out)
+EXTRAS=${EXTRAS:-serve}
 OFFICIAL=python:3.11-slim-bookworm
 # The classic builder: BuildKit would fetch its Dockerfile frontend and base metadata from a
 # registry, and Debian's docker.io ships no buildx.
@@ -25,7 +28,7 @@ else
   base=$(deploy/image/debian-base.sh)
 fi
 
-docker build --build-arg PYTHON_IMAGE="$base" -t "$IMAGE" . >&2
+docker build --build-arg PYTHON_IMAGE="$base" --build-arg EXTRAS="$EXTRAS" -t "$IMAGE" . >&2
 if [ "$base" != "$OFFICIAL" ]; then
   for service in nginx prometheus; do
     docker build -q --build-arg BASE_IMAGE="$base" -t "motion-style-$service:debian" \

@@ -26,6 +26,7 @@ DEBIAN_OVERRIDE = REPO / "deploy" / "compose.debian.yml"
 OFFICIAL_BASE = "python:3.11-slim-bookworm"
 BASE = os.environ.get("MOTION_IMAGE_BASE", "")
 IMAGE = yaml.safe_load(COMPOSE_FILE.read_text())["services"]["api"]["image"]
+FBX_IMAGE = "motion-style:fbx"  # the image with the fbx extra (make image-fbx)
 STYLES_DIR = "/var/lib/motion-style/styles"
 UID = "10001"
 
@@ -92,13 +93,13 @@ class Container:
     """``docker run`` of the image as a deployment runs it: read-only root, /tmp a tmpfs,
     registered styles on the named volume ``volume``, port 8000 on a free loopback port."""
 
-    def __init__(self, volume: str, env: dict[str, str] | None = None) -> None:
+    def __init__(self, volume: str, env: dict[str, str] | None = None, image: str = IMAGE) -> None:
         self.name = unique("motion-style-test")
         args = ["run", "-d", "--name", self.name, "--read-only", "--tmpfs", "/tmp"]
         args += ["-v", f"{volume}:{STYLES_DIR}", "-p", "127.0.0.1::8000"]
         for key, value in (env or {}).items():
             args += ["-e", f"{key}={value}"]
-        docker(*args, IMAGE)
+        docker(*args, image)
         host_port = docker("port", self.name, "8000/tcp").stdout.split()[0]
         self.url = "http://" + host_port.replace("0.0.0.0", "127.0.0.1")
 
