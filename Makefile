@@ -46,12 +46,18 @@ clean:
 # deploy/image/build.sh). `make image-test` (CI runs it after `make test`) first installs
 # docker.io, docker-compose and debootstrap with apt and starts dockerd where they are
 # missing, then drives the container and the compose stack over HTTP (tests/image).
-.PHONY: image image-test
+# `make image-fbx` builds motion-style:fbx, the same with the fbx extra (Blender, +0.9 GB);
+# image-test builds and tests it too.
+.PHONY: image image-fbx image-test
 image:
 	deploy/image/build.sh
 
+image-fbx:
+	EXTRAS="serve fbx" IMAGE=motion-style:fbx deploy/image/build.sh
+
 image-test: $(VENV)/.dev
 	deploy/image/ensure-docker.sh
+	EXTRAS="serve fbx" IMAGE=motion-style:fbx deploy/image/build.sh >/dev/null
 	base=$$(deploy/image/build.sh) && MOTION_IMAGE_BASE=$$base $(PY) -m pytest tests/image -v --durations=5
 
 # Loopback load test of a fresh `python -m service`: 16 clients x 60 s on the GET endpoints,

@@ -107,9 +107,14 @@ class BlenderPool:
 
     def start(self) -> None:
         """Start the workers (in parallel) and wait until each has loaded Blender."""
+        began = time.monotonic()
         workers = [_Worker() for _ in range(self.size)]
         for w in workers:
             self._give_back_when_ready(w, "start")
+        logger.info(
+            "FBX: %d of %d Blender workers ready in %.1f s",
+            len(self._idle), self.size, time.monotonic() - began,
+        )  # fmt: skip
 
     def close(self) -> None:
         with self._condition:

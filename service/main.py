@@ -46,10 +46,11 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     auth.log_startup(settings)
     app.state.runner.start()
     app.state.registry.start()
-    if settings.fbx_workers and fbx.installed():  # warm Blender before the first FBX
+    if settings.fbx_workers and fbx.installed():  # warm Blender before readiness
+        app.state.blender_warm = threading.Event()
         threading.Thread(
             target=_start_blender,
-            args=(app.state.registry, settings.fbx_workers),
+            args=(app.state.registry, settings.fbx_workers, app.state.blender_warm),
             name="blender-start",
             daemon=True,
         ).start()
@@ -62,11 +63,15 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         metrics.mark_worker_dead()
 
 
-def _start_blender(registry: ModelRegistry, workers: int) -> None:
-    """The FBX pool's Blender processes, once the models have loaded: readiness never waits
-    for them, nor do they take the CPU the models' loading needs."""
-    registry.wait()
-    fbx.start(workers)
+def _start_blender(registry: ModelRegistry, workers: int, warm: threading.Event) -> None:
+    """The FBX pool's Blender processes, once the models have loaded (they do not take the
+    CPU the loading needs); readiness waits for them (``warm``, set even if none starts: the
+    log says why), so a replica is never in rotation while Blender boots beside requests."""
+    try:
+        registry.wait()
+        fbx.start(workers)
+    finally:
+        warm.set()
 
 
 def create_app(
@@ -84,6 +89,7 @@ def create_app(
         lifespan=lifespan,
     )
     app.state.settings = settings
+    app.state.blender_warm = None  # an Event while the FBX pool starts (lifespan)
     registered = StyleStore.from_settings(settings)
     app.state.registry = ModelRegistry(settings, engines, registered)
     app.state.runner = InferenceRunner(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from pydantic import BaseModel
 
 from service.deps import RegistryDep
@@ -36,13 +36,22 @@ async def get_healthz() -> Liveness:
     return Liveness()
 
 
+def _require_blender(request: Request) -> None:
+    """503 while the FBX pool's Blender workers start (after the models, before readiness)."""
+    warm = request.app.state.blender_warm
+    if warm is not None and not warm.is_set():
+        reason = "Blender workers (FBX) are starting"
+        raise NotReady(reason, headers={"Retry-After": "2"}, state="loading", reasons=[reason])
+
+
 @router.get(
     "/readyz",
-    summary="Readiness: 200 when every model is loaded and warmed",
+    summary="Readiness: 200 when every model is loaded and warmed (and Blender, for FBX)",
     responses=problem_responses(503),
 )
-async def get_readyz(registry: RegistryDep) -> Readiness:
+async def get_readyz(registry: RegistryDep, request: Request) -> Readiness:
     registry.require_ready()
+    _require_blender(request)
     return Readiness(models=registry.readiness()["models"])
 
 
@@ -56,8 +65,9 @@ async def get_live_v2() -> LiveV2:
     summary="Readiness (Open Inference Protocol)",
     responses=problem_responses(503),
 )
-async def get_ready_v2(registry: RegistryDep) -> ReadyV2:
+async def get_ready_v2(registry: RegistryDep, request: Request) -> ReadyV2:
     if not registry.ready:
         info = registry.readiness()
         raise NotReady("; ".join(info["reasons"]), ready=False, **info)
+    _require_blender(request)
     return ReadyV2(ready=True)

@@ -11,6 +11,8 @@ length. Without bpy these skip, except the 415 that says how to enable FBX.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -21,6 +23,7 @@ from service.config import Settings
 from tests.api.helpers import assert_problem
 from tests.fbx_files import blender_reads, make_fbx_files, require_bpy
 from tests.rigs import FIXTURE
+from tests.server import ServerProcess
 from training.songs import encoded, song
 
 OCTET = "application/octet-stream"
@@ -214,3 +217,15 @@ def test_without_the_extra_an_fbx_is_a_415_that_says_how_to_enable_it(
     body = assert_problem(r, 415, "unsupported-media-type")
     assert "fbx extra" in body["detail"] and "pip install 'motion-style[fbx]'" in body["detail"]
     assert "MOTION_FBX_WORKERS" in body["detail"]
+
+
+def test_a_replica_reports_ready_only_once_its_blender_workers_are_warm(tmp_path):
+    """Blender starts after the models and before readiness: a replica never takes traffic
+    while its workers boot beside the requests, and the first FBX finds them warm."""
+    require_bpy()
+    log_path = tmp_path / "server.log"
+    with ServerProcess(env={"MOTION_FBX_WORKERS": "2"}, log_path=log_path) as server:
+        log = server.log()  # as it stood at the first 200 from /readyz
+        ready = re.search(r"FBX: (\d) of 2 Blender workers ready", log)
+        assert ready is not None and ready.group(1) == "2", log[-3000:]
+        assert log.index("models ready") < ready.start()
