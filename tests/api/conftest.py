@@ -12,6 +12,7 @@ import pytest
 
 from service.config import Settings
 from service.main import create_app
+from tests.api.helpers import blender_warm
 from tests.api.translator_helpers import video_zip
 from tests.rigs import FIXTURE
 
@@ -41,6 +42,7 @@ def make_client() -> Iterator[Callable[..., TestClient]]:
             client = stack.enter_context(TestClient(app, **client_kwargs))
             if wait:
                 assert app.state.registry.wait(60), "models did not finish loading"
+                assert blender_warm(app), "Blender workers did not finish starting"
             return client
 
         yield make
@@ -57,7 +59,7 @@ def shared_client() -> Iterator[TestClient]:
     """The app as shipped, one per test module (its graphs load and warm once)."""
     app = create_app()
     with TestClient(app) as client:
-        assert app.state.registry.wait(120)
+        assert app.state.registry.wait(120) and blender_warm(app)
         yield client
 
 

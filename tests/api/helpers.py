@@ -82,3 +82,9 @@ def write_tiny_model(
     }
     (models_dir / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return manifest
+
+
+def blender_warm(app, timeout: float = 120) -> bool:
+    """Whether the FBX pool's Blender workers (if the app starts any) are warm within
+    ``timeout``: readiness waits for them."""
+    return app.state.blender_warm is None or app.state.blender_warm.wait(timeout)

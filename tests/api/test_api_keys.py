@@ -28,7 +28,7 @@ from service.inference import InferenceRunner
 from service.key_limits import KeyLimits
 from service.log import RequestIdFilter, key_name_var
 from service.main import create_app
-from tests.api.helpers import assert_problem
+from tests.api.helpers import assert_problem, blender_warm
 from tests.rigs import FIXTURE
 from tests.server import REPO
 
@@ -63,7 +63,7 @@ def keyed(tmp_path_factory):
     )
     app = create_app(settings)
     with TestClient(app) as client:
-        assert app.state.registry.wait(120) and app.state.registry.ready
+        assert app.state.registry.wait(120) and app.state.registry.ready and blender_warm(app)
         yield client, keys, keys_file
 
 
