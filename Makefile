@@ -118,7 +118,7 @@ game-invariants: $(VENV)/.dev
 record-evaluations: $(VENV)/.dev
 	$(PY) -m model_export.evaluations $(if $(LIBRARY_ARGS),\
 	runs/eval/$(notdir $(abspath $(MODELS)))/foreign-test.json --models-dir $(MODELS),\
-	$(wildcard runs/eval/foreign-test.json runs/eval/dance.json))
+	$(wildcard runs/eval/foreign-test.json runs/eval/dance.json runs/eval/game-invariants.json))
 
 bench-fast: $(VENV)/.dev
 	$(PY) -m bench.bench_fast

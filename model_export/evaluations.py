@@ -1,6 +1,6 @@
 """The one step that records evaluations in the manifest: an evaluation writes its report as
 JSON (``training.eval_foreign``: ``runs/eval/foreign-test.json``; ``training.eval_dance
---json``), and this puts its headline figures into the judged models' entries
+--json``; ``training.game_invariants --json``), and this puts its headline figures into the judged models' entries
 (``metrics.evaluation``), refused for another version of a model than the one judged.
 
     python -m model_export.evaluations REPORT.json [...] [--models-dir DIR]
@@ -122,14 +122,49 @@ def record_dance(report: dict, models_dir: Path) -> None:
     )
 
 
+def record_game_invariants(report: dict, models_dir: Path) -> None:
+    """``training.game_invariants``' figures into each restyling family's entry
+    (``metrics.evaluation.game_invariants_held_back``): per clip, the family's worst style."""
+
+    def worst(section: str, figure: str, family: str) -> dict:
+        return {clip: v[figure][family]["worst"] for clip, v in report[section].items()}
+
+    for family, model in report["models"].items():
+        figures = {
+            "loop_jump_median_steps": worst("loops", "jump_steps", family),
+            "every_cycle_taken_as_a_loop": all(
+                v["taken_as_loop"] for v in report["loops"].values()
+            ),
+            "reference_frame_moved_share_of_height": worst(
+                "reference_frames", "first_frame_moved_share_of_height", family
+            ),
+            "every_reference_frame_found": all(
+                v["found"] for v in report["reference_frames"].values()
+            ),
+            "in_place_travel_share_of_height": worst("in_place", "travel_share_of_height", family),
+            "bandai_takes_found_with_reference_frames": len(
+                report["reference_frames_found_in_bandai"]["found"]
+            ),
+            "measured": report.get("measured", ""),
+            "by": "python -m training.game_invariants (every style; clips that chose no threshold)",
+        }
+        put_evaluation(
+            model["name"], model["version"], "game_invariants_held_back", figures, models_dir
+        )
+
+
 def record(report: dict, models_dir: Path = MF.MODELS_DIR) -> None:
-    """A report of either evaluation into the manifest (the foreign one by its ``half``)."""
+    """A report of any evaluation into the manifest (the foreign one by its ``half``)."""
     if "half" in report:
         record_foreign(report, models_dir)
     elif "beat_alignment" in report:
         record_dance(report, models_dir)
+    elif "reference_frames_found_in_bandai" in report:
+        record_game_invariants(report, models_dir)
     else:
-        raise ValueError("not a report of training.eval_foreign or training.eval_dance")
+        raise ValueError(
+            "not a report of training.eval_foreign, training.eval_dance or training.game_invariants"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,6 +3,9 @@ every style of both shipped families through the real app (default settings unle
 
     python -m training.game_invariants [--json runs/eval/game-invariants.json]
 
+``python -m model_export.evaluations runs/eval/game-invariants.json`` records each family's
+worst figures in its manifest entry (``metrics.evaluation.game_invariants_held_back``).
+
 The thresholds were chosen on other clips: the reference-frame one (``motion.reference``)
 on the 24 foreign takes of ``make eval-foreign`` (the nine ``cmu-31`` takes, the figure's
 own, among them), the loop tolerances (``motion.loops``) on ``cmu-31`` walk cycles and the
@@ -109,6 +112,11 @@ class Service:
         self.client.__enter__()
         if not self.app.state.registry.wait(300):
             raise RuntimeError("the models did not load")
+        self.models = {
+            m.family: {"name": m.name, "version": m.version}
+            for m in self.app.state.registry.manifest.models
+            if m.family in ENDPOINTS
+        }
         listing = self.client.get("/v1/styles").json()
         self.styles = {
             f: sorted(s["name"] for s in listing[f] if not s.get("registered")) for f in ENDPOINTS
@@ -149,7 +157,7 @@ def worst(by_family: dict, key=None) -> dict:
 
 
 def measure(service: Service) -> dict:
-    report: dict = {"loops": {}, "reference_frames": {}, "in_place": {}}
+    report: dict = {"models": service.models, "loops": {}, "reference_frames": {}, "in_place": {}}
     report["reference_frames_found_in_bandai"] = reference_frames_in_bandai()
     for name in CYCLES:
         clip = bandai(f"dataset-1_{name}")
@@ -202,6 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         report = measure(service)
     finally:
         service.close()
+    report["measured"] = time.strftime("%Y-%m-%d")
     report["seconds"] = round(time.time() - started, 1)
     text = json.dumps(report, indent=1)
     print(text)
