@@ -208,6 +208,9 @@ class Plan:
                 (b"T", b"Lcl Translation", translations[:, k]),
                 (b"R", b"Lcl Rotation", rotations[:, k]),
             ):
+                if self.parents[k] >= 0 and _holds(values, node.props.get(prop)):
+                    continue  # the node's own value all along (a bone's offset): no curves;
+                    # root bones are always keyed, so the take keeps its length
                 curve_node = next(fresh)
                 p70 = [
                     B.Node.make(b"P", c, b"Number", b"", b"A", float(values[0, i]))
@@ -238,6 +241,14 @@ class Plan:
         _count(doc, b"AnimationCurve", added_curves)
         _time_span(doc, int(times[0]), int(times[-1]), fps, self.fps)
         return B.dumps(doc)
+
+
+def _holds(values: np.ndarray, static: list | None) -> bool:
+    """Whether every frame of ``values`` (F, 3) is the node's static value ``static``."""
+    if static is None or len(static) < 3:
+        return False
+    scale = max(1.0, float(np.abs(values).max()))
+    return bool(np.abs(values - np.asarray(static[:3], dtype=np.float64)).max() <= 1e-5 * scale)
 
 
 def _ids(used: set[int]):
