@@ -112,11 +112,11 @@ class Service:
         self.client.__enter__()
         if not self.app.state.registry.wait(300):
             raise RuntimeError("the models did not load")
-        self.models = {
-            m.family: {"name": m.name, "version": m.version}
-            for m in self.app.state.registry.manifest.models
-            if m.family in ENDPOINTS
-        }
+        self.models: dict[str, dict] = {}  # the first model folder's, as served by name
+        for manifest in self.app.state.registry.manifests.values():
+            for m in manifest.models:
+                if m.family in ENDPOINTS:
+                    self.models.setdefault(m.family, {"name": m.name, "version": m.version})
         listing = self.client.get("/v1/styles").json()
         self.styles = {
             f: sorted(s["name"] for s in listing[f] if not s.get("registered")) for f in ENDPOINTS

@@ -39,7 +39,7 @@ def test_an_authored_cycle_jumps_nowhere_and_in_place_holds_still(walk):
 
 def test_the_report_goes_into_both_restyling_families_entries(tmp_path):
     models = tmp_path / "models"
-    shutil.copytree(Settings().models_dir, models)
+    shutil.copytree(Settings().models_dir[0], models)
     entries = {m.family: m for m in load_manifest(models).models}
     families = ("translator", "fast")
 
