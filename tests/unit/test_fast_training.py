@@ -90,7 +90,7 @@ def test_smoke_training_and_export(tmp_path, monkeypatch, data_dir):
     assert (logs / "style_angry" / "log.txt").exists()
 
     shutil.copytree(Settings().models_dir[0], models)
-    with pytest.raises(ValueError, match="no held-out Bandai take is in one of its styles"):
+    with pytest.raises(ValueError, match="no held-out take is in one of its styles"):
         X.main(["--checkpoint-dir", str(ckpt), "--models-dir", str(models)])  # angry alone
     X.main(["--checkpoint-dir", str(ckpt), "--models-dir", str(models), "--output-smoothing", "0"])
     manifest = load_manifest(models)
