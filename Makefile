@@ -128,8 +128,9 @@ show-styles: $(VENV)/.dev
 	$(PY) -m training.show_styles
 
 # Dance (jacob2019 made to work): the alignment study writes training/dance_alignment.json;
-# training resumes from checkpoints/dance.pt when it exists (TensorBoard in runs/dance/).
-# Extra flags: DANCE_ARGS="--max-steps 100 --minutes 60". eval-dance: the generated beat test
+# train-dance replays training/dance_schedule.json into checkpoints/dance.pt from the stage the
+# checkpoint has not finished (TensorBoard in runs/dance/); DANCE_ARGS="--from-scratch"
+# retrains every stage. eval-dance: the generated beat test
 # set (tracker F-measure, alignment to known beats vs shifted grids), every shared song, the
 # held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
 # contact score, AIST++ feature distances to real dance (development and test halves).
@@ -144,7 +145,7 @@ dance-tempo: $(VENV)/.dev
 	$(PY) -m training.dance_tempo --json runs/eval/dance_tempo.json
 
 train-dance: $(VENV)/.dev
-	$(PY) -m training.dance --threads 2 $(if $(wildcard checkpoints/dance.pt),--resume) $(DANCE_ARGS)
+	$(PY) -m training.dance_schedule $(DANCE_ARGS)
 
 export-dance: $(VENV)/.dev
 	$(PY) -m model_export.dance

@@ -94,7 +94,18 @@ def record_dance(report: dict, models_dir: Path) -> None:
         "foot_sliding_cm_s": report["foot_sliding_cm_s"],
         "foot_contact_score": report["foot_contact_score"],
         "feature_distances_test_half": report["feature_distances"]["test"],
-        "genre_accuracy": {k: v for k, v in report["genre_accuracy"].items() if k != "confusion"},
+        "genre_accuracy": {
+            **{
+                k: v
+                for k, v in report["genre_accuracy"].items()
+                if k not in ("confusion", "by_half")
+            },
+            "test_half": {
+                k: v
+                for k, v in report["genre_accuracy"]["by_half"]["test"].items()
+                if k != "confusion"
+            },
+        },  # fmt: skip
         "ten_minutes": {k: v for k, v in report["ten_minutes"].items() if k != "per_seed"},
         "generated_set": {
             "songs": len(gen),

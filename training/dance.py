@@ -1,6 +1,8 @@
-"""Music to dance (jacob2019, made to work): data windows, network, losses, training loop.
+"""Music to dance (jacob2019, made to work): network and training loop (data windows in
+``training.dance_data``, losses in ``training.dance_losses``).
 
-    python -m training.dance [--max-steps N] [--minutes M] [--resume]
+    python -m training.dance [--max-steps N] [--minutes M] [--resume | --init CKPT]
+    python -m training.dance_schedule          # the shipped model's stages (make train-dance)
     python -m training.eval_dance              # held-out songs, through the shipped engine
 
 Network (per frame at 30 fps): the song's features (``motion.dance_features.song_features``:
@@ -10,6 +12,8 @@ between) -> the next pose (``motion.dance_features`` encoding: 6D rotations with
 relative to the facing frame, root velocity and turning in the facing frame, hips height,
 foot contacts). The genre is given (one-hot) or predicted from the music by a classifier
 head on the time-averaged audio code, whose probabilities then stand in for the one-hot.
+With ``--film`` the genre also scales and shifts the input of the second cell and the output
+of the last (FiLM), so it reaches every layer, not only the first cell's input.
 
 Training: windows of ``--window`` frames from the Dance with Melody dances (retimed onto
 their songs' clocks as ``training/dance_alignment.json`` says; beat phase only where the
@@ -19,7 +23,9 @@ conditioning (Zhou et al. 2018): ground-truth stretches of ``--gt-frames`` alter
 self-fed stretches whose length ramps up to ``--cond-frames``, so long generation neither
 freezes nor drifts. Losses: rotation/root features, forward-kinematics positions (root-local,
 leg lengths), Laban effort (angular-velocity energy per window, log ratio), foot skating
-under ground-truth contacts, genre cross-entropy. Whole songs are held out by take.
+under ground-truth contacts, genre cross-entropy. Whole songs are held out by take. With
+``--swap-share`` some music windows are asked another genre and judged by a classifier of
+real dances and a per-genre prior instead (``training.dance_genre``: why and how).
 
 Writes ``checkpoints/dance.pt`` (weights, step, config and the feature statistics: what an
 export needs) and the optimiser beside it in ``dance.pt.state`` (for ``--resume``, never
@@ -31,8 +37,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as dt
-import hashlib
-import json
 import math
 import os
 import time
@@ -43,190 +47,33 @@ import numpy as np
 import torch
 from torch import nn
 
-from motion import canonical as C
 from motion import dance_features as DF
-from motion import kinematics as K
-from training import fk as TFK
+from training import dance_genre as TG
+from training.dance_data import Sequence, WindowSampler, prepare, start_poses
+from training.dance_losses import Losses
 
 REPO = Path(__file__).resolve().parent.parent
 CHECKPOINT = REPO / "checkpoints" / "dance.pt"
 RUNS = REPO / "runs" / "dance"
-PREPARED_VERSION = "1"
 VAL_TAKES = ("DANCE_C_8", "DANCE_R_5", "DANCE_W_26", "DANCE_W_8")
 """Held-out songs: one cha-cha, one rumba and one waltz with verified alignment, one waltz
 whose tempo needed correcting (tango has one dance only: it stays in training)."""
 
-WEIGHTS = {"feat": 1.0, "pos": 4.0, "effort": 0.2, "skate": 0.05, "genre": 0.1}
-
-
-# --------------------------------------------------------------------------- data
-
-
-@dataclass
-class Sequence:
-    """One dance as network inputs: raw ``audio (F, AUDIO_CHANNELS)`` and ``motion (F,
-    MOTION_CHANNELS)`` at 30 fps on the song's clock, genre index, whether it has music and
-    whether its beat phase is trusted."""
-
-    name: str
-    genre: int
-    audio: np.ndarray
-    motion: np.ndarray
-    has_music: bool
-    trusted: bool
-
-    @property
-    def frames(self) -> int:
-        return len(self.motion)
-
-
-def silent_audio(frames: int) -> np.ndarray:
-    """Audio input ``(frames, AUDIO_CHANNELS)`` of silence (beat unknown)."""
-    row = DF.song_features(np.zeros(2205, np.float32), 22050, 1)[0]
-    return DF.drop_beats(np.repeat(row[None], frames, axis=0))
-
-
-def retime(motion, rate: float):
-    """``motion`` (30 fps, motion clock) resampled onto the song's clock: frame ``j`` shows
-    motion time ``j / 30 / rate``."""
-    count = int(np.floor((motion.num_frames - 1) * rate)) + 1
-    return K.resample_at(motion, np.arange(count) / rate, motion.fps)
-
-
-def _prepare_dwm(clip, alignment, root: Path) -> Sequence:
-    from motion import audio_decode
-    from training.dance_alignment import analyse_music
-
-    motion = retime(clip.motion, alignment.rate)
-    folder = root / Path(clip.extra["audio"]).parent
-    music = analyse_music(folder)
-    samples, sr = audio_decode.decode(folder / "audio.mp3")
-    x = DF.song_features(
-        samples,
-        sr,
-        motion.num_frames,
-        offset=alignment.offset,
-        beats=music["beats"],
-        tempo=float(music["tempo"]),
-    )
-    if not alignment.trusted:
-        x = DF.drop_beats(x)
-    return Sequence(
-        clip.name,
-        DF.genre_index(clip.genre),
-        x,
-        DF.encode(motion).features,
-        True,
-        alignment.trusted,
-    )
-
-
-def prepare(log=print) -> list[Sequence]:
-    """Every training/validation sequence, cached in the data cache (rebuilt when the clips,
-    the alignment table or :data:`PREPARED_VERSION` change)."""
-    from training import dance_alignment as DA
-    from training.data import cache_dir, data_dir, load_cmu_dance, load_dance_with_melody
-
-    table = DA.load_table()
-    dwm, cmu = load_dance_with_melody(), load_cmu_dance()
-    key = hashlib.sha256(
-        json.dumps(
-            [PREPARED_VERSION, table["dances"], [(c.name, c.num_frames) for c in dwm + cmu]],
-            sort_keys=True,
-        ).encode()
-    ).hexdigest()[:16]
-    path = cache_dir() / f"dance_prepared_{key}.npz"
-    if path.exists():
-        with np.load(path) as z:
-            meta = json.loads(str(z["meta"]))
-            return [
-                Sequence(m["name"], m["genre"], z[f"a{i}"], z[f"m{i}"], m["music"], m["trusted"])
-                for i, m in enumerate(meta)
-            ]
-    seqs = []
-    for clip in dwm:
-        alignment = DA.alignment_for(clip.name, table)
-        if alignment is None:
-            log(f"{clip.name}: not in the alignment table, skipped")
-            continue
-        seqs.append(_prepare_dwm(clip, alignment, data_dir()))
-        log(f"prepared {clip.name} ({alignment.verdict}, rate {alignment.rate:.4f})")
-    for clip in cmu:
-        if clip.genre not in DF.GENRES:
-            continue
-        motion = DF.encode(clip.motion).features
-        seqs.append(
-            Sequence(
-                clip.name, DF.genre_index(clip.genre), silent_audio(len(motion)), motion,
-                False, False,
-            )
-        )  # fmt: skip
-    arrays = {}
-    for i, s in enumerate(seqs):
-        arrays[f"a{i}"], arrays[f"m{i}"] = s.audio, s.motion
-    meta = [
-        {"name": s.name, "genre": s.genre, "music": s.has_music, "trusted": s.trusted} for s in seqs
-    ]
-    np.savez_compressed(path, meta=np.array(json.dumps(meta)), **arrays)
-    return seqs
+WEIGHTS = {
+    "feat": 1.0,
+    "pos": 4.0,
+    "effort": 0.2,
+    "skate": 0.05,
+    "genre": 0.1,
+    "judge": 0.0,
+    "prior": 0.0,
+}
+SCHEDULE = Path(__file__).with_name("dance_schedule.json")
 
 
 def split(seqs: list[Sequence], val_takes=VAL_TAKES) -> tuple[list[Sequence], list[Sequence]]:
     """Train and validation sequences by whole song."""
     return [s for s in seqs if s.name not in val_takes], [s for s in seqs if s.name in val_takes]
-
-
-def start_poses(seqs: list[Sequence], count: int = 64, seed: int = 0) -> np.ndarray:
-    """Raw motion frames ``(count, MOTION_CHANNELS)`` spread over the training dances with
-    music: the service's seeded starting poses."""
-    rng = np.random.default_rng(seed)
-    pool = [s for s in seqs if s.has_music]
-    picks = []
-    for i in range(count):
-        s = pool[i % len(pool)]
-        picks.append(s.motion[rng.integers(0, s.frames)])
-    poses = np.stack(picks).astype(np.float32)
-    poses[:, DF.VELOCITY] = 0.0
-    poses[:, DF.TURN] = 0.0
-    return poses
-
-
-class WindowSampler:
-    """Random windows ``(B, T, ...)`` of normalised training sequences."""
-
-    def __init__(self, seqs, stats: DF.DanceStats, window: int, cmu_share: float, seed: int):
-        self.window = window
-        self.rng = np.random.default_rng(seed)
-        self.music = [s for s in seqs if s.has_music and s.frames > window]
-        self.silent = [s for s in seqs if not s.has_music and s.frames > window]
-        self.cmu_share = cmu_share if self.silent else 0.0
-        self.audio = {id(s): stats.normalize_audio(s.audio) for s in self.music + self.silent}
-        self.motion = {id(s): stats.normalize_motion(s.motion) for s in self.music + self.silent}
-        self.trusted_index = {id(s): s.trusted for s in self.music}
-
-    def _pick(self, pool):
-        weights = np.array([s.frames - self.window for s in pool], dtype=np.float64)
-        return pool[self.rng.choice(len(pool), p=weights / weights.sum())]
-
-    def batch(self, size: int, beat_dropout: float = 0.1):
-        audio, motion, genre, music = [], [], [], []
-        for _ in range(size):
-            silent = self.rng.random() < self.cmu_share
-            s = self._pick(self.silent if silent else self.music)
-            t0 = int(self.rng.integers(0, s.frames - self.window))
-            a = self.audio[id(s)][t0 : t0 + self.window].copy()
-            if s.has_music and s.trusted and self.rng.random() < beat_dropout:
-                a[:, DF.BEAT_COLUMNS] = 0.0
-            audio.append(a)
-            motion.append(self.motion[id(s)][t0 : t0 + self.window])
-            genre.append(s.genre)
-            music.append(s.has_music)
-        return (
-            torch.from_numpy(np.stack(audio)),
-            torch.from_numpy(np.stack(motion)),
-            torch.tensor(genre),
-            torch.tensor(music),
-        )
 
 
 # --------------------------------------------------------------------------- network
@@ -239,6 +86,7 @@ class Config:
     audio_hidden: int = 256
     genre_dim: int = 16
     dropout: float = 0.25
+    film: bool = False  # the genre also scales and shifts each LSTM layer's output
 
 
 class DanceNet(nn.Module):
@@ -267,6 +115,12 @@ class DanceNet(nn.Module):
         self.cell2 = nn.LSTMCell(cfg.hidden, cfg.hidden)
         self.drop = nn.Dropout(cfg.dropout)
         self.out = nn.Linear(cfg.hidden, DF.MOTION_CHANNELS)
+        if cfg.film:  # zero: a network fine-tuned from one without starts where it was
+            self.film1 = nn.Linear(len(DF.GENRES), 2 * cfg.hidden)
+            self.film2 = nn.Linear(len(DF.GENRES), 2 * cfg.hidden)
+            for layer in (self.film1, self.film2):
+                nn.init.zeros_(layer.weight)
+                nn.init.zeros_(layer.bias)
 
     def encode_audio(self, audio: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         code = self.audio(audio)
@@ -279,23 +133,41 @@ class DanceNet(nn.Module):
     def step(self, code, genre, prev, h1, c1, h2, c2):
         x = torch.cat([code, self.genre(genre), prev], dim=-1)
         h1, c1 = self.cell1(x, (h1, c1))
-        h2, c2 = self.cell2(self.drop(h1), (h2, c2))
-        return self.out(h2), h1, c1, h2, c2
+        if not self.config.film:
+            h2, c2 = self.cell2(self.drop(h1), (h2, c2))
+            return self.out(h2), h1, c1, h2, c2
+        h2, c2 = self.cell2(self._film(self.film1, genre, self.drop(h1)), (h2, c2))
+        return self.out(self._film(self.film2, genre, h2)), h1, c1, h2, c2
+
+    def _film(self, layer: nn.Linear, genre: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """``x * (1 + scale) + shift``, both linear in the genre; the weights are split (and
+        the 1 folded into the bias) outside the product, so an export folds them into two
+        constant matrices instead of slicing the product every frame."""
+        n = self.config.hidden
+        scale = nn.functional.linear(genre, layer.weight[:n], layer.bias[:n] + 1)
+        return x * scale + nn.functional.linear(genre, layer.weight[n:], layer.bias[n:])
 
     def rollout(
         self, code, genre, motion, gt_mask: torch.Tensor | None = None, warm: int = 0
     ) -> torch.Tensor:
         """Poses ``(B, T - 1, M)`` for frames 1.. of ``motion (B, T, M)``: frame 0 is given;
         each later frame is fed back its own prediction, or the ground truth where
-        ``gt_mask (T,)`` is true (and for the first ``warm`` frames)."""
+        ``gt_mask`` (``(T,)``, or ``(B, T)`` per window) is true (and for the first ``warm``
+        frames)."""
         state = self.init_state(motion.shape[0])
         prev = motion[:, 0]
         outs = []
         for t in range(1, motion.shape[1]):
             pose, *state = self.step(code[:, t], genre, prev, *state)
             outs.append(pose)
-            use_gt = t < warm or (gt_mask is not None and bool(gt_mask[t]))
-            prev = motion[:, t] if use_gt else pose
+            if t < warm:
+                prev = motion[:, t]
+            elif gt_mask is None:
+                prev = pose
+            elif gt_mask.dim() == 1:
+                prev = motion[:, t] if bool(gt_mask[t]) else pose
+            else:
+                prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
         return torch.stack(outs, dim=1)
 
 
@@ -307,59 +179,6 @@ def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.
     return torch.from_numpy(((np.arange(frames) + phase) % period) < gt)
 
 
-# --------------------------------------------------------------------------- losses
-
-
-class Losses(nn.Module):
-    """Feature, FK position, Laban effort and foot skating losses on standardised poses."""
-
-    def __init__(self, stats: DF.DanceStats) -> None:
-        super().__init__()
-        self.register_buffer("mean", torch.from_numpy(stats.motion_mean))
-        self.register_buffer("std", torch.from_numpy(stats.motion_std))
-        self.register_buffer(
-            "offsets", torch.tensor(C.OFFSETS[DF.BODY] / DF.LEG, dtype=torch.float32)
-        )
-        self.parents = [-1] + [int(p) - 1 for p in C.PARENTS[DF.BODY[1:]]]
-        feet = [int(np.flatnonzero(DF.BODY == j)[0]) for j in DF.FOOT_JOINTS]
-        self.feet = feet
-
-    def raw(self, z: torch.Tensor) -> torch.Tensor:
-        return z * self.std + self.mean
-
-    def kinematics(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Local matrices ``(..., 21, 3, 3)`` and root-local positions ``(..., 21, 3)``."""
-        r6 = raw[..., DF.ROTATIONS].reshape(raw.shape[:-1] + (len(DF.BODY), 6))
-        lmat = TFK.matrix_from_6d(r6)
-        lpos = self.offsets.expand(raw.shape[:-1] + (len(DF.BODY), 3))
-        h = raw[..., DF.HEIGHT]
-        root = torch.stack([torch.zeros_like(h), h, torch.zeros_like(h)], dim=-1)
-        lpos = torch.cat([root.unsqueeze(-2), lpos[..., 1:, :]], dim=-2)
-        return lmat, TFK.fk(lmat, lpos, self.parents)[1]
-
-    def forward(self, pred: torch.Tensor, target: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``pred``, ``target`` ``(B, T, M)`` standardised -> named scalar losses."""
-        out = {"feat": ((pred - target) ** 2).mean()}
-        rp, rt = self.raw(pred), self.raw(target)
-        mp, pp = self.kinematics(rp)
-        mt, pt = self.kinematics(rt)
-        out["pos"] = ((pp - pt) ** 2).sum(-1).mean()
-        # Laban effort: angular-velocity energy (frame-to-frame rotation change), per window
-        ep = ((mp[:, 1:] - mp[:, :-1]) ** 2).sum((-1, -2)).mean((1, 2)) * DF.FPS**2
-        et = ((mt[:, 1:] - mt[:, :-1]) ** 2).sum((-1, -2)).mean((1, 2)) * DF.FPS**2
-        out["effort"] = (torch.log(ep + 1e-3) - torch.log(et + 1e-3)).abs().mean()
-        # foot skating: world speed on the floor of the predicted feet where the target is planted
-        fp = pp[..., self.feet, :]
-        vel = (fp[:, 1:] - fp[:, :-1]) * DF.FPS
-        root_v = rp[:, 1:, DF.VELOCITY]
-        turn = rp[:, 1:, DF.TURN].unsqueeze(-1)
-        vx = vel[..., 0] + root_v[..., 0:1] + turn * fp[:, 1:, :, 2]
-        vz = vel[..., 2] + root_v[..., 1:2] - turn * fp[:, 1:, :, 0]
-        planted = (rt[:, 1:, DF.CONTACTS] > 0.5).float()
-        out["skate"] = (planted * (vx**2 + vz**2)).sum() / planted.sum().clamp_min(1.0)
-        return out
-
-
 # --------------------------------------------------------------------------- training
 
 
@@ -369,6 +188,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many steps")
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall time")
     p.add_argument("--resume", action="store_true", help=f"continue from {CHECKPOINT.name}")
+    p.add_argument("--init", type=Path, default=None,
+                   help="start from this checkpoint's weights, statistics and start poses "
+                   "(a new schedule from step 0; layers it lacks start at zero)")  # fmt: skip
+    p.add_argument("--film", action="store_true", help="genre FiLM on both LSTM layers")
+    p.add_argument("--stage", default=None,
+                   help="the schedule stage this run is (recorded once its steps are done)")  # fmt: skip
+    p.add_argument("--swap-share", type=float, default=0.0,
+                   help="share of music windows asked another genre (judge and prior only)")  # fmt: skip
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--window", type=int, default=96, help="frames per training window")
     p.add_argument("--gt-frames", type=int, default=5, help="ground-truth stretch length")
@@ -394,7 +221,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best) -> None:
+def save_checkpoint(
+    path: Path, model, optimiser, step, args, stats, poses, best, stages=()
+) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
     tmp = path.with_suffix(".tmp")
@@ -407,6 +236,7 @@ def save_checkpoint(path: Path, model, optimiser, step, args, stats, poses, best
             "stats": stats.arrays(),
             "start_poses": poses,
             "best_val": best,
+            "stages": list(stages),
             "saved_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         },
         tmp,
@@ -428,35 +258,66 @@ def load_checkpoint(path: Path = CHECKPOINT) -> tuple[DanceNet, DF.DanceStats, d
     return model, DF.DanceStats.from_arrays(ckpt["stats"]), ckpt
 
 
-def train_step(model, losses, batch, args, rng, step, weights) -> dict[str, torch.Tensor]:
+def init_from(path: Path, config: Config) -> tuple[DanceNet, DF.DanceStats, dict]:
+    """A network with the weights of checkpoint ``path`` and its sizes, FiLM as ``config``
+    says (layers the checkpoint lacks keep their zero start); the checkpoint."""
+    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    config = dataclasses.replace(config, **{k: v for k, v in ckpt["net_config"].items()
+                                            if k != "film"})  # fmt: skip
+    model = DanceNet(config)
+    missing, unexpected = model.load_state_dict(ckpt["model"], strict=False)
+    if unexpected or any(not k.startswith("film") for k in missing):
+        raise ValueError(f"{path} does not fit: missing {missing}, unexpected {unexpected}")
+    model.train()
+    return model, DF.DanceStats.from_arrays(ckpt["stats"]), ckpt
+
+
+def train_step(
+    model, losses, batch, args, rng, step, weights, judge=None
+) -> dict[str, torch.Tensor]:
     audio, motion, genre, music = batch
     code, logits = model.encode_audio(audio)
-    onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
+    asked = genre.clone()
+    swapped = TG.swap_genres(asked, music, args.swap_share, rng)
+    onehot = nn.functional.one_hot(asked, len(DF.GENRES)).float()
     cond_vec = onehot
     if args.predicted_genre > 0:
         probs = torch.softmax(logits.detach(), dim=-1)
         predicted = torch.zeros_like(onehot)
         predicted[:, : len(DF.MUSIC_GENRES)] = probs
-        use = music & (torch.rand(len(genre)) < args.predicted_genre)
+        use = music & ~swapped & (torch.rand(len(genre)) < args.predicted_genre)
         cond_vec = torch.where(use[:, None], predicted, onehot)
     cond = max(1, min(args.cond_frames, 1 + step * args.cond_frames // max(args.cond_ramp, 1)))
     mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng)
+    if swapped.any():  # a swapped window has no ground truth to feed back
+        mask = mask[None].expand(len(genre), -1) & ~swapped[:, None]
     pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
-    parts = losses(pred, motion[:, 1:])
+    if swapped.all():
+        parts = {k: torch.zeros(()) for k in ("feat", "pos", "effort", "skate")}
+    else:
+        parts = losses(pred[~swapped], motion[~swapped, 1:])
     if music.any():
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
+    parts["judge"] = parts["prior"] = torch.zeros(())
+    if judge is not None and music.any():
+        raw = losses.raw(pred[music][:, args.warm - 1 :])
+        stats = TG.window_statistics(losses.kinematics(raw)[1], raw)
+        parts["judge"] = nn.functional.cross_entropy(judge(stats), asked[music])
+        if swapped.any():
+            parts["prior"] = judge.prior(stats[swapped[music]], asked[swapped])
     parts["total"] = sum(weights[k] * parts[k] for k in weights)
     return parts
 
 
 @torch.no_grad()
-def validate(model, losses, val_batches) -> dict[str, float]:
-    """Mean losses over fixed validation windows, free-running after the warm-up frames."""
+def validate(model, losses, val_batches, judge=None) -> dict[str, float]:
+    """Mean losses over fixed validation windows, free-running after the warm-up frames;
+    with a judge, the share of windows asked another genre (the next one) it names so."""
     model.eval()
     totals: dict[str, float] = {}
-    correct = count = 0
+    correct = count = judged = 0
     for audio, motion, genre, music in val_batches:
         code, logits = model.encode_audio(audio)
         onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
@@ -465,7 +326,16 @@ def validate(model, losses, val_batches) -> dict[str, float]:
             totals[k] = totals.get(k, 0.0) + float(v) / len(val_batches)
         correct += int((logits[music].argmax(-1) == genre[music]).sum())
         count += int(music.sum())
+        if judge is not None:
+            other = (genre[music] + 1) % len(DF.MUSIC_GENRES)
+            asked = nn.functional.one_hot(other, len(DF.GENRES)).float()
+            pred = model.rollout(code[music], asked, motion[music], None, warm=8)
+            raw = losses.raw(pred[:, 7:])
+            named = judge(TG.window_statistics(losses.kinematics(raw)[1], raw)).argmax(-1)
+            judged += int((named == other).sum())
     totals["genre_acc"] = correct / max(count, 1)
+    if judge is not None:
+        totals["swapped_judged"] = judged / max(count, 1)
     model.train()
     return totals
 
@@ -484,11 +354,26 @@ def train(args: argparse.Namespace) -> None:
         model, stats, ckpt = load_checkpoint(args.checkpoint)
         model.train()
         poses, step, best = ckpt["start_poses"], int(ckpt["step"]), ckpt.get("best_val")
+        stages = list(ckpt.get("stages", []))
+    elif args.init is not None:
+        model, stats, start = init_from(args.init, Config(film=args.film))
+        poses, stages, step, best, ckpt = (
+            start["start_poses"],
+            start.get("stages", []),
+            0,
+            None,
+            None,
+        )
     else:
         stats = DF.DanceStats.fit([s.audio for s in train_seqs if s.has_music],
                                   [s.motion for s in train_seqs])  # fmt: skip
-        model, poses, step, best, ckpt = DanceNet(Config(hidden=args.hidden)), None, 0, None, None
-        poses = start_poses(train_seqs)
+        model, step, best, ckpt = (
+            DanceNet(Config(hidden=args.hidden, film=args.film)),
+            0,
+            None,
+            None,
+        )
+        poses, stages = start_poses(train_seqs), []
     losses = Losses(stats)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     if ckpt is not None and optimiser_path(args.checkpoint).exists():
@@ -496,6 +381,14 @@ def train(args: argparse.Namespace) -> None:
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
+    judge = None
+    if weights["judge"] > 0 or weights["prior"] > 0:
+        judge = TG.fit_judge(
+            WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
+            WindowSampler(val_seqs, stats, args.window, 0.0, 4321),
+            losses,
+            skip=args.warm - 1,
+        )
     tb = None
     try:
         from torch.utils.tensorboard import SummaryWriter
@@ -513,7 +406,8 @@ def train(args: argparse.Namespace) -> None:
         lr = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / total_steps, 1.0)))
         for group in optimiser.param_groups:
             group["lr"] = lr
-        parts = train_step(model, losses, sampler.batch(args.batch), args, rng, step, weights)
+        batch = sampler.batch(args.batch)
+        parts = train_step(model, losses, batch, args, rng, step, weights, judge)
         optimiser.zero_grad()
         parts["total"].backward()
         nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -528,17 +422,21 @@ def train(args: argparse.Namespace) -> None:
             tb.add_scalar("train/lr", lr, step)
             tb.add_scalar("train/iterations_per_s", rate, step)
         if step % args.val_every == 0 or step == stop_at:
-            val = validate(model, losses, val_batches)
+            val = validate(model, losses, val_batches, judge)
             if tb:
                 for k, v in val.items():
                     tb.add_scalar(f"val/{k}", v, step)
             bar.write(f"step {step} val " + " ".join(f"{k} {v:.4f}" for k, v in val.items()))
             if best is None or val["pos"] < best["pos"]:
                 best = {**val, "step": step}
+        if step >= total_steps and args.stage and args.stage not in stages:
+            stages.append(args.stage)
         if step % args.save_every == 0 or step == stop_at:
-            save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best)
+            save_checkpoint(
+                args.checkpoint, model, optimiser, step, args, stats, poses, best, stages
+            )
     bar.close()
-    save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best)
+    save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best, stages)
     elapsed = time.time() - started
     print(
         f"{step - first_step} steps in {elapsed:.0f} s "

@@ -207,6 +207,7 @@ def held_out_songs():
     each held-out song, and ``(genre, real motion)`` of the training songs' dances."""
     from training import dance as TD
     from training import dance_alignment as DA
+    from training.dance_data import retime
     from training.data import data_dir, load_dance_with_melody
 
     table = DA.load_table()
@@ -215,7 +216,7 @@ def held_out_songs():
         alignment = DA.alignment_for(clip.name, table)
         if alignment is None:
             continue
-        motion = TD.retime(clip.motion, alignment.rate)
+        motion = retime(clip.motion, alignment.rate)
         if clip.name not in TD.VAL_TAKES:
             train.append((clip.genre, motion))
             continue
@@ -264,6 +265,8 @@ def held_out(engine, seeds: int, log=print) -> dict:
     contact = {"real": [], "generated": []}
     generated_dances: dict[str, list[Motion]] = {}
     confusion = {g: {h: 0 for h in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
+    halves = {h: {g: {n: 0 for n in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
+              for h in DM.HALVES}  # fmt: skip
     real_hits, songs = [], {}
     for name, genre, real, samples, sr in held:
         beats = audio_features.frame_features(samples, sr, DF.FPS).beats
@@ -281,6 +284,10 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 out = engine.predict(job, StageTimer(engine.name)).motion
                 named = genre_clf.predict(genre_features(out))
                 confusion[asked][named] += 1
+                middle = real.num_frames // 2
+                for half, piece in zip(DM.HALVES, (out.slice(0, middle), out.slice(middle)),
+                                       strict=True):  # fmt: skip
+                    halves[half][asked][genre_clf.predict(genre_features(piece))] += 1
                 sliding["generated"].append(CT.canonical_foot_sliding(out))
                 contact["generated"].append(DM.physical_foot_contact(out))
                 if asked != genre:
@@ -320,10 +327,20 @@ def held_out(engine, seeds: int, log=print) -> dict:
             "chance": round(1 / len(DF.MUSIC_GENRES), 4),
             "n_generated": total,
             "confusion": confusion,
+            "by_half": {half: genre_accuracy(c) for half, c in halves.items()},
         },
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
     }
+
+
+def genre_accuracy(confusion: dict[str, dict[str, int]]) -> dict:
+    """Share of generated dances whose asked genre the classifier names, over all and per
+    asked genre, from ``confusion[asked][named]`` counts."""
+    per = {g: round(row[g] / max(sum(row.values()), 1), 4) for g, row in confusion.items()}
+    hits = sum(row[g] for g, row in confusion.items())
+    total = sum(sum(row.values()) for row in confusion.values())
+    return {"all": round(hits / max(total, 1), 4), "per_genre": per, "confusion": confusion}
 
 
 def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict:
@@ -355,10 +372,16 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
 
 
 def evaluate(
-    seeds: int = 3, log=print, *, test_songs=None, shared_names: list[str] | None = None
+    seeds: int = 3,
+    log=print,
+    *,
+    test_songs=None,
+    shared_names: list[str] | None = None,
+    held_out_only: bool = False,
 ) -> dict:
     """All parts: ``test_songs`` (default the whole beat test set) and ``shared_names``
-    (default every shared song) narrow the first two."""
+    (default every shared song) narrow the first two; ``held_out_only`` runs only the
+    held-out songs' part (genre, feet, distances: what compares two models)."""
     engine, entry = load_engine()
     report: dict = {
         "model": f"{entry.name} {entry.version}",
@@ -368,12 +391,14 @@ def evaluate(
         "machine": measuring_machine(),
         "measured": time.strftime("%Y-%m-%d"),
     }
-    report["generated_set"] = generated_set(engine, 1, log, test_songs)
-    report["shared_songs"] = shared_songs(engine, log, names=shared_names)
+    if not held_out_only:
+        report["generated_set"] = generated_set(engine, 1, log, test_songs)
+        report["shared_songs"] = shared_songs(engine, log, names=shared_names)
     held = held_out(engine, seeds, log)
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
     report.update(held)
-    report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log)
+    if not held_out_only:
+        report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log)
     return report
 
 
@@ -400,10 +425,25 @@ def _pattern_table(rows: list[dict]) -> list[str]:
 
 
 def markdown(report: dict) -> str:
-    gen = report["generated_set"]["songs"]
-    lines = [
-        f"**dance** ({report['model']})",
-        "",
+    lines = [f"**dance** ({report['model']})", ""]
+    if "generated_set" in report:
+        lines += _generated_set_lines(report["generated_set"]["songs"])
+    lines += _held_out_lines(report)
+    if "ten_minutes" in report:
+        t = report["ten_minutes"]
+        lines.append(
+            f"Ten minutes ({t['frames']} frames, {t['seeds']} seeds): stalls {t['stalls']}, "
+            f"slowest 5 s {t['slowest_5s_share']:.0%} of the median; mean joint speed per 30 s "
+            f"from {t['per_30s_min']} to {t['per_30s_max']} cm/s; real dances {t['real_mean']} "
+            "cm/s. First and last 30 s by seed: "
+            + ", ".join(f"{r['first_30s']} / {r['last_30s']}" for r in t["per_seed"])
+            + "."
+        )
+    return "\n".join(lines)
+
+
+def _generated_set_lines(gen: list[dict]) -> list[str]:
+    return [
         f"Generated beat test set ({len(gen)} songs of 60 s; tracker beat F-measure, 70 ms, "
         "strict and at any metrical level; dance beat alignment against the known beats / "
         "shifted known grids; slowest 5-s window as a share of the median joint speed):",
@@ -416,7 +456,11 @@ def markdown(report: dict) -> str:
         f"{sum(r['passes'] for r in gen)}/{len(gen)} songs at alignment >= {PASS_SCORE} and "
         f">= {PASS_RATIO}x chance; stalls {sum(d['stalls'] for r in gen for d in r['dances'])}.",
     ]
-    shared = report["shared_songs"]
+
+
+def _held_out_lines(report: dict) -> list[str]:
+    lines = []
+    shared = report.get("shared_songs")
     if shared:
         lines += [
             "",
@@ -466,7 +510,7 @@ def markdown(report: dict) -> str:
         "",
         *DM.distance_table(report["feature_distances"]),
     ]
-    g, t = report["genre_accuracy"], report["ten_minutes"]
+    g = report["genre_accuracy"]
     confusion = "; ".join(
         f"{asked}: " + ", ".join(f"{k} {v}" for k, v in row.items() if v)
         for asked, row in g["confusion"].items()
@@ -477,14 +521,14 @@ def markdown(report: dict) -> str:
         f"{g['generated']:.0%} of {g['n_generated']} generated dances (every genre asked of "
         f"every held-out song), real held-out {g['real_held_out']:.0%}, chance "
         f"{g['chance']:.0%}. Asked -> named: {confusion}.",
-        f"Ten minutes ({t['frames']} frames, {t['seeds']} seeds): stalls {t['stalls']}, "
-        f"slowest 5 s {t['slowest_5s_share']:.0%} of the median; mean joint speed per 30 s "
-        f"from {t['per_30s_min']} to {t['per_30s_max']} cm/s; real dances {t['real_mean']} "
-        "cm/s. First and last 30 s by seed: "
-        + ", ".join(f"{r['first_30s']} / {r['last_30s']}" for r in t["per_seed"])
-        + ".",
+        *(
+            f"Genre, {half} half of each held-out song: {h['all']:.0%} ("
+            + ", ".join(f"{k} {v:.0%}" for k, v in h["per_genre"].items())
+            + ")."
+            for half, h in g["by_half"].items()
+        ),
     ]
-    return "\n".join(lines)
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -496,6 +540,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="one seed, two patterns, the held-out songs only: a smoke run",
     )
+    p.add_argument(
+        "--held-out-only",
+        action="store_true",
+        help="only the held-out songs (genre, feet, distances): to compare models",
+    )
     args = p.parse_args(argv)
     if args.quick:
         from training.dance import VAL_TAKES
@@ -504,7 +553,7 @@ def main(argv: list[str] | None = None) -> int:
         songs = beat_test_set(patterns=("four_on_the_floor", "break"))
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
     else:
-        report = evaluate(args.seeds)
+        report = evaluate(args.seeds, held_out_only=args.held_out_only)
     publish(report, markdown(report), args.json)
     return 0
 

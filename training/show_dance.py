@@ -52,6 +52,7 @@ def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
     from service.metrics import StageTimer
     from training import dance as TD
     from training import dance_alignment as DA
+    from training.dance_data import retime
     from training.data import data_dir, load_dance_with_melody
     from training.eval_dance import load_engine
 
@@ -67,7 +68,7 @@ def phrases(seed: int = 0) -> list[tuple[str, Motion]]:
     for genre in sorted(chosen):
         name = chosen[genre]
         clip, alignment = clips[name], DA.alignment_for(name, table)
-        real = TD.retime(clip.motion, alignment.rate)
+        real = retime(clip.motion, alignment.rate)
         samples, sr = audio_decode.decode(
             data_dir() / Path(clip.extra["audio"]).parent / "audio.mp3"
         )

@@ -113,10 +113,10 @@ def _stats(walk):
 
 def test_torch_fk_matches_numpy(walk):
     from motion import rotations as rot
-    from training import dance as TD
+    from training.dance_losses import Losses
 
     stats, m = _stats(walk)
-    losses = TD.Losses(stats)
+    losses = Losses(stats)
     _, pos = losses.kinematics(torch.from_numpy(m))
     # numpy: root-local body positions in leg lengths (facing frame, root on the floor)
     grot, gpos = K.fk(walk.lrot, walk.lpos, walk.skeleton.parents)
@@ -128,13 +128,15 @@ def test_torch_fk_matches_numpy(walk):
 
 def test_rollout_losses_and_a_few_steps_learn(walk):
     from training import dance as TD
+    from training.dance_data import Sequence, WindowSampler
+    from training.dance_losses import Losses
 
     torch.manual_seed(0)
     stats, m = _stats(walk)
-    seq = TD.Sequence("walk", 3, np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32), m, True, True)
-    sampler = TD.WindowSampler([seq], stats, 24, 0.0, seed=0)
+    seq = Sequence("walk", 3, np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32), m, True, True)
+    sampler = WindowSampler([seq], stats, 24, 0.0, seed=0)
     model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32))
-    losses = TD.Losses(stats)
+    losses = Losses(stats)
     args = TD.parse_args(["--window", "24", "--cond-ramp", "5", "--predicted-genre", "0.5"])
     rng = np.random.default_rng(0)
     opt = torch.optim.Adam(model.parameters(), lr=3e-3)
@@ -160,12 +162,16 @@ def test_ac_mask_alternates():
     assert set(runs) <= {5, 10}
 
 
-def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk):
+@pytest.mark.parametrize("film", [False, True])
+def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk, film):
     from model_export import dance as ED
     from training import dance as TD
 
     torch.manual_seed(0)
-    model = TD.DanceNet(TD.Config(hidden=48, code=16, audio_hidden=32)).eval()
+    model = TD.DanceNet(TD.Config(hidden=48, code=16, audio_hidden=32, film=film)).eval()
+    if film:  # FiLM starts at zero: make it do something
+        for layer in (model.film1, model.film2):
+            torch.nn.init.normal_(layer.weight, std=0.3)
     (tmp_path / "manifest.json").write_text('{"schema_version": 1, "models": []}')
     stats, m = _stats(walk)
     entry = ED.export_bundle(model, stats, m[:4], tmp_path)
@@ -226,6 +232,10 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     genre = report["genre_accuracy"]
     assert genre["n_generated"] == 2 * 4  # every genre asked, per seed
     assert sum(sum(r.values()) for r in genre["confusion"].values()) == 8
+    for half in genre["by_half"].values():  # each half of each dance named on its own
+        assert sum(sum(r.values()) for r in half["confusion"].values()) == 8
+        hits = sum(half["confusion"][g][g] for g in half["confusion"])
+        assert half["all"] == round(hits / 8, 4)
     ten = report["ten_minutes"]
     assert [r["seed"] for r in ten["per_seed"]] == [0, 1]
     assert ten["frames"] >= 60 * 30 - 1  # a minute of motion for a minute of music
@@ -239,6 +249,10 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     recorded = recorded_evaluation(record_dance, report, tmp_path)
     assert recorded["held_out_songs"]["seeds"] == 2
     assert recorded["held_out_songs"]["generated_set"]["songs"] == 1
+    assert (
+        recorded["held_out_songs"]["genre_accuracy"]["test_half"]["all"]
+        == (genre["by_half"]["test"]["all"])
+    )
 
 
 def test_stalls_are_slow_windows_of_music():

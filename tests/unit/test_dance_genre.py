@@ -1,0 +1,138 @@
+"""Genre the dance network cannot ignore (training.dance_genre): swapped windows, the judge
+and prior, the genre FiLM layers and fine-tuning a network that had none."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motion import dance_features as DF
+from motion import retarget
+from tests.rigs import load_fixture
+
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture(scope="module")
+def walk():
+    m = load_fixture()
+    return retarget.to_canonical(m, retarget.make_rig(m.skeleton, m))
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_swapped_windows_are_music_windows_asked_another_music_genre():
+    from training import dance_genre as TG
+
+    rng = np.random.default_rng(0)
+    genre = torch.from_numpy(rng.integers(0, len(DF.GENRES), 2000))
+    music = genre < len(DF.MUSIC_GENRES)
+    asked = genre.clone()
+    swapped = TG.swap_genres(asked, music, 0.5, rng)
+    assert not swapped[~music].any()
+    assert 0.4 < swapped[music].float().mean() < 0.6
+    assert (asked[swapped] != genre[swapped]).all() and (asked[swapped] < 4).all()
+    assert (asked[~swapped] == genre[~swapped]).all()
+    # every other music genre is asked
+    assert set(asked[swapped].tolist()) == set(range(len(DF.MUSIC_GENRES)))
+
+
+def test_judge_separates_genres_and_the_prior_bounds_each_genre():
+    from training import dance_genre as TG
+
+    gen = torch.Generator().manual_seed(0)
+    genre = torch.arange(400) % 4
+    centres = torch.randn(4, 10, generator=gen) * 3
+    stats = centres[genre] + torch.randn(400, 10, generator=gen)
+    judge = TG.GenreJudge(10)
+    assert judge.fit(stats, genre) > 0.95
+    assert not any(p.requires_grad for p in judge.parameters())
+    inside = centres[genre[:8]]
+    assert float(judge.prior(inside, genre[:8])) == 0.0
+    far = inside + 10.0
+    assert float(judge.prior(far, genre[:8])) > 1.0
+    # a window like genre 1 asked as genre 2 is out of genre 2's band
+    assert float(judge.prior(centres[1:2], torch.tensor([2]))) > 0.0
+
+
+def _stats(walk):
+    m = DF.encode(walk).features
+    a = np.random.default_rng(0).normal(size=(len(m), DF.AUDIO_CHANNELS)).astype(np.float32)
+    return DF.DanceStats.fit([a], [m]), m, a
+
+
+def test_film_starts_as_the_network_it_fine_tunes(tmp_path, walk):
+    """A FiLM network initialised from a checkpoint without FiLM steps exactly as it did, and
+    a checkpoint of another shape is refused."""
+    from training import dance as TD
+
+    torch.manual_seed(0)
+    stats, m, _ = _stats(walk)
+    plain = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval()
+    path = tmp_path / "plain.pt"
+    torch.save({"model": plain.state_dict(), "net_config": {"hidden": 32, "code": 16,
+                "audio_hidden": 32}, "stats": stats.arrays(), "start_poses": m[:2]}, path)  # fmt: skip
+    film, _, ckpt = TD.init_from(path, TD.Config(film=True))
+    film.eval()
+    assert film.config.film and film.config.hidden == 32 and len(ckpt["start_poses"]) == 2
+    code = torch.randn(2, 16)
+    genre = torch.eye(len(DF.GENRES))[[0, 3]]
+    prev = torch.randn(2, DF.MOTION_CHANNELS)
+    with torch.no_grad():
+        want = plain.step(code, genre, prev, *plain.init_state(2))
+        got = film.step(code, genre, prev, *film.init_state(2))
+    for w, g in zip(want, got, strict=True):
+        torch.testing.assert_close(w, g)
+    other = TD.DanceNet(TD.Config(hidden=32, code=8, audio_hidden=32))
+    torch.save({"model": other.state_dict(), "net_config": {"hidden": 32, "code": 16,
+                "audio_hidden": 32}, "stats": stats.arrays(), "start_poses": m[:2]}, path)  # fmt: skip
+    with pytest.raises(RuntimeError):
+        TD.init_from(path, TD.Config(film=True))
+
+
+def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
+    from training import dance as TD
+    from training import dance_genre as TG
+    from training.dance_data import Sequence, WindowSampler
+    from training.dance_losses import Losses
+
+    torch.manual_seed(0)
+    stats, m, a = _stats(walk)
+    seqs = [Sequence(f"walk{g}", g, a, m, True, True) for g in range(len(DF.MUSIC_GENRES))]
+    losses = Losses(stats)
+    args = TD.parse_args(["--window", "24", "--swap-share", "1.0", "--w-judge", "1", "--w-prior",
+                          "1", "--warm", "4", "--cond-ramp", "1"])  # fmt: skip
+    judge = TG.fit_judge(WindowSampler(seqs, stats, 24, 0.0, 1), WindowSampler(seqs, stats, 24, 0.0, 2),
+                         losses, skip=args.warm - 1)  # fmt: skip
+    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32, film=True))
+    weights = {k: getattr(args, f"w_{k}") for k in TD.WEIGHTS}
+    batch = WindowSampler(seqs, stats, 24, 0.0, 3).batch(6)
+    parts = TD.train_step(model, losses, batch, args, np.random.default_rng(0), 0, weights, judge)
+    assert all(torch.isfinite(v) for v in parts.values())
+    assert float(parts["judge"].detach()) > 0
+    assert float(parts["feat"]) == 0.0  # every window swapped: nothing to reconstruct
+    parts["total"].backward()
+    assert model.film2.weight.grad.abs().sum() > 0  # the asked genre reaches the output
+    val = TD.validate(model, losses, [batch], judge)
+    assert 0.0 <= val["swapped_judged"] <= 1.0
+
+
+def test_schedule_stages_are_training_flags():
+    """Every flag of the shipped schedule is one ``training.dance`` accepts, and a later stage
+    fine-tunes with the genre FiLM layers the export writes."""
+    from training import dance as TD
+    from training import dance_schedule as DS
+
+    stages = DS.load_schedule()
+    assert [s["name"] for s in stages][0] == "base"
+    for stage in stages:
+        args = TD.parse_args(DS.stage_argv(stage))
+        for name, value in stage["flags"].items():
+            assert getattr(args, name.replace("-", "_")) == value
+    assert DS.stage_argv({"flags": {"film": True, "steps": 5}}) == ["--film", "--steps", "5"]
