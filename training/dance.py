@@ -186,6 +186,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--steps", type=int, default=20000, help="schedule length (lr decay)")
     p.add_argument("--max-steps", type=int, default=None, help="stop after this many steps")
+    p.add_argument("--stop-step", type=int, default=None,
+                   help="end the run at this step, the learning rate still decaying over --steps")  # fmt: skip
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall time")
     p.add_argument("--resume", action="store_true", help=f"continue from {CHECKPOINT.name}")
     p.add_argument("--init", type=Path, default=None,
@@ -397,7 +399,8 @@ def train(args: argparse.Namespace) -> None:
     except ImportError:  # pragma: no cover
         pass
     total_steps = args.steps
-    stop_at = step + args.max_steps if args.max_steps else total_steps
+    last = min(total_steps, args.stop_step or total_steps)  # the stage's last step
+    stop_at = min(step + args.max_steps, last) if args.max_steps else last
     deadline = time.time() + 60 * args.minutes if args.minutes else math.inf
     model.train()
     bar = tqdm(total=stop_at - step, desc="dance", unit="it")
@@ -429,7 +432,7 @@ def train(args: argparse.Namespace) -> None:
             bar.write(f"step {step} val " + " ".join(f"{k} {v:.4f}" for k, v in val.items()))
             if best is None or val["pos"] < best["pos"]:
                 best = {**val, "step": step}
-        if step >= total_steps and args.stage and args.stage not in stages:
+        if step >= last and args.stage and args.stage not in stages:
             stages.append(args.stage)
         if step % args.save_every == 0 or step == stop_at:
             save_checkpoint(
