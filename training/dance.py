@@ -342,6 +342,13 @@ def validate(model, losses, val_batches, judge=None) -> dict[str, float]:
     return totals
 
 
+def run_bounds(step: int, args: argparse.Namespace) -> tuple[int, int]:
+    """The stage's last step (``--steps``, or ``--stop-step`` before it) and where a run
+    from ``step`` stops (``--max-steps`` later, at most that last step)."""
+    last = min(args.steps, args.stop_step or args.steps)
+    return last, (min(step + args.max_steps, last) if args.max_steps else last)
+
+
 def train(args: argparse.Namespace) -> None:
     from tqdm import tqdm
 
@@ -399,8 +406,7 @@ def train(args: argparse.Namespace) -> None:
     except ImportError:  # pragma: no cover
         pass
     total_steps = args.steps
-    last = min(total_steps, args.stop_step or total_steps)  # the stage's last step
-    stop_at = min(step + args.max_steps, last) if args.max_steps else last
+    last, stop_at = run_bounds(step, args)
     deadline = time.time() + 60 * args.minutes if args.minutes else math.inf
     model.train()
     bar = tqdm(total=stop_at - step, desc="dance", unit="it")

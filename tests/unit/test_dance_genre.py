@@ -136,3 +136,14 @@ def test_schedule_stages_are_training_flags():
         for name, value in stage["flags"].items():
             assert getattr(args, name.replace("-", "_")) == value
     assert DS.stage_argv({"flags": {"film": True, "steps": 5}}) == ["--film", "--steps", "5"]
+
+
+def test_a_stage_stops_at_its_stop_step_and_a_resumed_run_never_passes_it():
+    from training import dance as TD
+
+    args = TD.parse_args(["--steps", "1600", "--stop-step", "1000"])
+    assert TD.run_bounds(0, args) == (1000, 1000)
+    args = TD.parse_args(["--steps", "1600", "--stop-step", "1000", "--max-steps", "300"])
+    assert TD.run_bounds(0, args) == (1000, 300)
+    assert TD.run_bounds(900, args) == (1000, 1000)
+    assert TD.run_bounds(0, TD.parse_args(["--steps", "50"])) == (50, 50)
