@@ -438,13 +438,13 @@ def train(args: argparse.Namespace) -> None:
             bar.write(f"step {step} val " + " ".join(f"{k} {v:.4f}" for k, v in val.items()))
             if best is None or val["pos"] < best["pos"]:
                 best = {**val, "step": step}
-        if step >= last and args.stage and args.stage not in stages:
-            stages.append(args.stage)
         if step % args.save_every == 0 or step == stop_at:
             save_checkpoint(
                 args.checkpoint, model, optimiser, step, args, stats, poses, best, stages
             )
     bar.close()
+    if step >= last and args.stage and args.stage not in stages:
+        stages.append(args.stage)
     save_checkpoint(args.checkpoint, model, optimiser, step, args, stats, poses, best, stages)
     elapsed = time.time() - started
     print(

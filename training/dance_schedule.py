@@ -55,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     stages = load_schedule()
     names = [s["name"] for s in stages]
     done, current = ([], None) if args.from_scratch else progress(args.out)
+    if args.out.exists() and not args.from_scratch and not done and current is None:
+        current = names[0]  # saved before checkpoints recorded stages: the first one's
     if done != names[: len(done)]:
         raise SystemExit(f"{args.out} finished stages {done}, not a prefix of the schedule")
     for stage in stages[len(done) :]:

@@ -124,8 +124,7 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
 
 
 def test_schedule_stages_are_training_flags():
-    """Every flag of the shipped schedule is one ``training.dance`` accepts, and a later stage
-    fine-tunes with the genre FiLM layers the export writes."""
+    """Every flag of the shipped schedule is one ``training.dance`` accepts, with its value."""
     from training import dance as TD
     from training import dance_schedule as DS
 
