@@ -119,7 +119,19 @@ class _Node:
         return cls(int(model.values()[0]), props, order, before, after)
 
     def matrix(self, translation: np.ndarray, angles: np.ndarray) -> np.ndarray:
-        return _translation(translation) @ self.before @ _rotation(angles, self.order) @ self.after
+        return _compose([self], translation[:, None], angles[:, None])[:, 0]
+
+
+def _compose(nodes: list[_Node], translation: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """The nodes' local matrices (F, J, 4, 4) from ``Lcl Translation`` and ``Lcl Rotation``
+    (F, J, 3 each; degrees), one rotation call per rotation order."""
+    rotations = np.empty(angles.shape[:2] + (4, 4))
+    for order in {n.order for n in nodes}:
+        group = [k for k, n in enumerate(nodes) if n.order == order]
+        rotations[:, group] = _rotation(angles[:, group], order)
+    before = np.array([n.before for n in nodes])
+    after = np.array([n.after for n in nodes])
+    return _translation(translation) @ before @ rotations @ after
 
 
 def _solve(nodes: list[_Node], local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -135,9 +147,7 @@ def _solve(nodes: list[_Node], local: np.ndarray) -> tuple[np.ndarray, np.ndarra
         seq = Rotation.from_matrix(rot[:, group].reshape(-1, 3, 3)).as_euler(order)
         seq = _continuous(seq.reshape(frames, len(group), 3))
         xyz[:, group] = np.degrees(seq[..., [order.index(a) for a in "xyz"]])
-    composed = np.empty_like(local)
-    for k, n in enumerate(nodes):
-        composed[:, k] = n.before @ _rotation(xyz[:, k], n.order) @ n.after
+    composed = _compose(nodes, np.zeros(xyz.shape), xyz)
     return local[..., :3, 3] - composed[..., :3, 3], xyz
 
 
@@ -417,6 +427,7 @@ def _plan(
     size = max(float(np.abs(first[:, :3, 3]).max()), 1e-9)
     roots: dict[int, np.ndarray] = {}
     held: dict[int, float] = {}  # constant curves above the bones: id -> value
+    file_values: list[tuple[np.ndarray, np.ndarray]] = []  # each bone's T and R, first frame
     for k, node in enumerate(nodes):
         values = {}
         for prop, default in ((b"Lcl Translation", 0.0), (b"Lcl Rotation", 0.0)):
@@ -442,11 +453,10 @@ def _plan(
             ]
             if any(np.abs(_curve_keys(by_id[cv])[1] - 1.0).max() > TOLERANCE for cv in scaled):
                 return f"bone {names[k]!r} is scaled by its animation"
-        local = node.matrix(values[b"Lcl Translation"], values[b"Lcl Rotation"])
+        file_values.append((values[b"Lcl Translation"], values[b"Lcl Rotation"]))
         if parents[k] >= 0:
             if parent_of.get(node.id) != nodes[parents[k]].id:
                 return f"bone {names[k]!r} has another parent in the FBX file than in Blender"
-            read = np.linalg.inv(first[parents[k]]) @ first[k]
         else:
             above = parent_of.get(node.id, 0)
             while above in by_id:  # keyed, maybe, but not moving: left as it is
@@ -459,13 +469,17 @@ def _plan(
                             return f"a node above bone {names[k]!r} is animated"
                         held[cv] = float(keys[0])  # retimed to the new span
                 above = parent_of.get(above, 0)
-            roots[k] = local @ np.linalg.inv(first[k])
-            continue
-        if (
-            np.abs(local[:3, 3] - read[:3, 3]).max() > TOLERANCE * size
-            or np.abs(local[:3, :3] - read[:3, :3]).max() > TOLERANCE
-        ):
-            return f"bone {names[k]!r}'s FBX transform is not the one Blender read"
+    translation, angles = (np.array(v)[None] for v in zip(*file_values, strict=True))
+    local = _compose(nodes, translation, angles)[0]  # (J, 4, 4) as the file has them
+    child = parents >= 0
+    read = np.linalg.inv(first[parents[child]]) @ first[child]  # as Blender read them
+    gap_t = np.abs(local[child, :3, 3] - read[:, :3, 3]).max(axis=-1) > TOLERANCE * size
+    gap_r = np.abs(local[child, :3, :3] - read[:, :3, :3]).max(axis=(-2, -1)) > TOLERANCE
+    if (gap_t | gap_r).any():
+        k = np.flatnonzero(child)[np.argmax(gap_t | gap_r)]
+        return f"bone {names[k]!r}'s FBX transform is not the one Blender read"
+    for k in np.flatnonzero(~child):
+        roots[int(k)] = local[k] @ np.linalg.inv(first[k])
     removed = {cn for i in ids for cn, _ in curve_nodes[i]}
     removed |= {cv for cn in removed for cv, _ in attached.get(cn, [])}
     _remove(doc, removed)
