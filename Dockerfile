@@ -36,12 +36,15 @@ FROM ${PYTHON_IMAGE} AS runtime
 ARG EXTRAS
 # bpy links X11 and OpenGL client libraries, but its workers never open a display or a GL
 # context: libGL and libGLX are unpacked without the Mesa drivers their package pulls in
-# (LLVM and all, 200 MB)
+# (LLVM and all, 200 MB). Versions are the base's Debian release's (DL3008): the base is
+# made per release, and an exact pin would break at its next point release.
+WORKDIR /tmp
+# hadolint ignore=DL3008
 RUN case " $EXTRAS " in *" fbx "*) \
       apt-get update -qq \
       && apt-get install -y -qq --no-install-recommends libx11-6 libxrender1 libxxf86vm1 \
            libxfixes3 libxi6 libxkbcommon0 libsm6 libgomp1 libglvnd0 >/dev/null \
-      && cd /tmp && apt-get download -qq libgl1 libglx0 \
+      && apt-get download -qq libgl1 libglx0 \
       && for deb in ./*.deb; do dpkg-deb -x "$deb" /; done && rm ./*.deb \
       && rm -rf /var/lib/apt/lists/* /var/cache/apt/*.bin /var/log/apt /var/log/dpkg.log ;; \
     esac
