@@ -5,7 +5,8 @@ length (``motion.audio_features``; beats tracked on the song itself) -> standard
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
 fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
-motion (root integrated) -> feet pinned and gliding feet lifted -> time warp putting its
+motion (root integrated) -> contacts predicted and the feet planted there
+(``motion.dance_feet``) -> time warp putting its
 kinematic beats on the song's pulses (``motion.beat_warp``) -> the requested frame rate ->
 onto the request's skeleton, if any. The family's core, :meth:`DanceEngine.predict`, runs
 from the decoded samples to the canonical dance at 30 fps; the service (through ``prepare``
@@ -20,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from motion import audio_decode, audio_features
+from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
@@ -234,10 +235,10 @@ class DanceEngine(Engine):
             warnings.append("no beat found in the music: the dance is not beat-aligned")
         with timer.stage("motion"):
             raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
-            _, motion = DF.keep_moving(raw, music.playing)
+            x, motion = DF.keep_moving(raw, music.playing)
         if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
             with timer.stage("foot_cleanup"):
-                motion = DF.clean_feet(motion)
+                motion = dance_feet.clean_feet(motion, x[:, DF.CONTACTS] > 0.5)
         if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
                 motion = BW.warp_to_beats(motion, pulses).motion

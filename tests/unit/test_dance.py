@@ -296,35 +296,3 @@ def test_keep_moving_fills_a_standstill_only(walk):
     _, untouched = DF.keep_moving(raw.astype(np.float32), silent)
     np.testing.assert_allclose(BW.joint_speed(K.global_positions(untouched), DF.FPS), before,
                                rtol=1e-4, atol=1e-3)  # fmt: skip
-
-
-def test_lift_gliding_feet_lifts_a_skating_stretch_only():
-    """A standing body carried along the floor for 1.3 s of 10: both feet skate there. The
-    lift raises them to the clearance while they move and leaves the rest untouched."""
-    from motion import canonical as C
-    from motion import contacts as CT
-    from motion.skeleton import Motion
-
-    frames, fps = 300, 30.0
-    lrot = np.zeros((frames, len(C.JOINTS), 4))
-    lrot[..., 3] = 1.0
-    lpos = np.repeat(C.OFFSETS[None], frames, axis=0)
-    lpos[:, 0] = 0.0
-    glide = slice(100, 140)
-    x = np.zeros(frames)
-    x[glide] = np.arange(40) * DF.LEG / fps  # one leg length per second
-    x[140:] = x[139]
-    lpos[:, C.INDEX["Hips"], 0] += x
-    motion = Motion(C.SKELETON, fps, lrot, lpos)
-    out = DF.lift_gliding_feet(motion)
-    before, after = K.global_positions(motion), K.global_positions(out)
-    feet = list(CT.CANONICAL_FOOT_JOINTS)
-    ground = CT.ground_heights(before, feet, DF.LEG)
-    height = after[:, feet, 1] - ground
-    assert (height[105:135] > 0.9 * DF.GLIDE_CLEARANCE * DF.LEG).all()
-    np.testing.assert_allclose(after[:80], before[:80], atol=1e-9)  # planted: untouched
-    np.testing.assert_allclose(after[160:], before[160:], atol=1e-9)
-    np.testing.assert_allclose(after[:, C.INDEX["Hips"]], before[:, C.INDEX["Hips"]])
-    bones = [np.linalg.norm(p[:, 1:] - p[:, C.PARENTS[1:]], axis=-1) for p in (before, after)]
-    np.testing.assert_allclose(bones[1], bones[0], atol=1e-6)  # lengths kept
-    assert CT.canonical_foot_sliding(out) < 0.5 * CT.canonical_foot_sliding(motion)

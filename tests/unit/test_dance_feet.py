@@ -1,0 +1,95 @@
+"""The dance's feet (motion.dance_feet): contacts predicted from the motion, feet planted."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from motion import canonical as C
+from motion import contacts as CT
+from motion import dance_feet as FT
+from motion import kinematics as K
+from motion import retarget
+from tests.rigs import load_fixture
+
+HIPS = C.INDEX["Hips"]
+
+
+@pytest.fixture(scope="module")
+def gliding_walk():
+    """A real walk (2 s) whose body travels 1.4 times as far as its steps carry it: the
+    planted feet glide along the floor, as the dance network's do."""
+    m = load_fixture()
+    walk = retarget.to_canonical(m, retarget.make_rig(m.skeleton, m))
+    lpos = walk.lpos.copy()
+    floor = lpos[:, HIPS][:, [0, 2]]
+    lpos[:, HIPS, 0] = floor[0, 0] + 1.4 * (floor[:, 0] - floor[0, 0])
+    lpos[:, HIPS, 2] = floor[0, 1] + 1.4 * (floor[:, 1] - floor[0, 1])
+    return walk, walk.replace(lpos=lpos)
+
+
+def _feet_still(gpos: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``(F, 22, 3)`` with only the feet set: the left one sliding at 1 m/s for the
+    first second while the right one stands, then the other way round."""
+    frames = int(2 * fps)
+    gpos = np.zeros((frames, len(C.JOINTS), 3))
+    t = np.arange(frames) / fps
+    left, right = np.minimum(t, 1.0) * 100.0, np.maximum(t - 1.0, 0.0) * 100.0
+    for joint, x, z in (("Foot_L", left, 10.0), ("Toes_L", left + 15, 10.0),
+                        ("Foot_R", right, -10.0), ("Toes_R", right + 15, -10.0)):  # fmt: skip
+        gpos[:, C.INDEX[joint], 0] = x
+        gpos[:, C.INDEX[joint], 1] = 8.0 if "Foot" in joint else 2.0
+        gpos[:, C.INDEX[joint], 2] = z
+    return gpos, t
+
+
+def test_the_support_is_the_slower_foot_and_someone_always_stands():
+    gpos, t = _feet_still(None, 30.0)
+    contacts = FT.predict_contacts(gpos, 30.0)
+    left, right = contacts[:, :2].any(axis=1), contacts[:, 2:].any(axis=1)
+    assert (left | right).all()
+    inner_first, inner_second = (t > 0.1) & (t < 0.9), (t > 1.1) & (t < 1.9)
+    assert right[inner_first].all() and not left[inner_first].any()
+    assert left[inner_second].all() and not right[inner_second].any()
+    # heel and toe both down when the foot is flat (heights over their own ground levels)
+    np.testing.assert_array_equal(contacts[:, 0], contacts[:, 1])
+
+
+def test_the_networks_contacts_are_kept():
+    gpos, t = _feet_still(None, 30.0)
+    network = np.zeros((len(gpos), 4), dtype=bool)
+    network[5:20, 1] = True  # the network stands the sliding left foot on its toes
+    contacts = FT.predict_contacts(gpos, 30.0, network)
+    assert contacts[5:20, :2].any(axis=1).all()
+    assert not contacts[22:28, :2].any()
+
+
+def test_a_gliding_walk_is_planted(gliding_walk):
+    walk, glide = gliding_walk
+    out = FT.clean_feet(glide)
+    before, after = K.global_positions(glide), K.global_positions(out)
+    assert CT.canonical_foot_sliding(glide) > 2.0 * CT.canonical_foot_sliding(walk)
+    assert CT.canonical_foot_sliding(out) < 0.5 * CT.canonical_foot_sliding(walk)
+    contacts = FT.predict_contacts(before, glide.fps)
+    # a flat foot in contact holds still on the floor
+    for i, joint in enumerate(FT.FEET):
+        held = contacts[1:, i] & contacts[:-1, i] & contacts[1:, i ^ 1] & contacts[:-1, i ^ 1]
+        step = np.linalg.norm(np.diff(after[:, joint][:, [0, 2]], axis=0), axis=-1)
+        assert held.sum() > 5 and step[held].max() < 0.05, C.JOINTS[joint]
+    # a foot in the air, away from its contacts, clears the floor
+    levels = FT.floor_levels(before, contacts)
+    ramp = int(np.ceil(FT.LIFT_RAMP_SECONDS * glide.fps)) + 3
+    for side in (0, 1):
+        planted = contacts[:, 2 * side] | contacts[:, 2 * side + 1]
+        free = FT._frames_from(planted) > ramp
+        low = after[:, FT.FEET[2 * side : 2 * side + 2], 1] - levels[2 * side : 2 * side + 2]
+        assert free.any() and (low[free].min(axis=1) > 0.8 * FT.CLEARANCE * FT.LEG).all()
+    # the travel is the clip's; only the hips' height and the legs change
+    np.testing.assert_allclose(after[:, HIPS][:, [0, 2]], before[:, HIPS][:, [0, 2]], atol=1e-9)
+    np.testing.assert_allclose(out.lrot[:, C.INDEX["Spine"]], glide.lrot[:, C.INDEX["Spine"]])
+    bones = [np.linalg.norm(p[:, 2:] - p[:, C.PARENTS[2:]], axis=-1) for p in (before, after)]
+    np.testing.assert_allclose(bones[1], bones[0], atol=1e-6)
+
+
+def test_no_motion_no_contacts():
+    assert FT.predict_contacts(np.zeros((0, len(C.JOINTS), 3)), 30.0).shape == (0, 4)
