@@ -263,6 +263,18 @@ def held_out(engine, seeds: int, log=print) -> dict:
     rows = {k: [] for k in ("real", "generated", "generated_no_warp", "generated_reference")}
     sliding = {"real": [], "generated": []}
     contact = {"real": [], "generated": []}
+    by_half = {h: {"sliding": {"real": [], "generated": []}, "contact": {"real": [], "generated": []}}
+               for h in DM.HALVES}  # fmt: skip
+
+    def feet(kind: str, motion: Motion) -> None:
+        sliding[kind].append(CT.canonical_foot_sliding(motion))
+        contact[kind].append(DM.physical_foot_contact(motion))
+        middle = motion.num_frames // 2
+        for h, part in zip(DM.HALVES, (motion.slice(0, middle), motion.slice(middle, None)),
+                           strict=True):  # fmt: skip
+            by_half[h]["sliding"][kind].append(CT.canonical_foot_sliding(part))
+            by_half[h]["contact"][kind].append(DM.physical_foot_contact(part))
+
     generated_dances: dict[str, list[Motion]] = {}
     confusion = {g: {h: 0 for h in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
     halves = {h: {g: {n: 0 for n in DF.MUSIC_GENRES} for g in DF.MUSIC_GENRES}
@@ -273,8 +285,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
         known = reference_beats(samples, sr, reference_tempo(table[name])[0])
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
-        sliding["real"].append(CT.canonical_foot_sliding(real))
-        contact["real"].append(DM.physical_foot_contact(real))
+        feet("real", real)
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
@@ -288,8 +299,7 @@ def held_out(engine, seeds: int, log=print) -> dict:
                 for half, piece in zip(DM.HALVES, (out.slice(0, middle), out.slice(middle)),
                                        strict=True):  # fmt: skip
                     halves[half][asked][genre_clf.predict(genre_features(piece))] += 1
-                sliding["generated"].append(CT.canonical_foot_sliding(out))
-                contact["generated"].append(DM.physical_foot_contact(out))
+                feet("generated", out)
                 if asked != genre:
                     continue
                 generated_dances.setdefault(name, []).append(out)
@@ -320,6 +330,13 @@ def held_out(engine, seeds: int, log=print) -> dict:
         },  # fmt: skip
         "foot_sliding_cm_s": {k: round(float(np.mean(v)), 2) for k, v in sliding.items()},
         "foot_contact_score": {k: round(float(np.mean(v)), 3) for k, v in contact.items()},
+        "feet_by_half": {
+            h: {
+                m: {k: round(float(np.mean(v)), 3) for k, v in kinds.items()}
+                for m, kinds in measures.items()
+            }
+            for h, measures in by_half.items()
+        },  # fmt: skip
         "feature_distances": DM.feature_distances(held, train, generated_dances),
         "genre_accuracy": {
             "generated": round(hits / max(total, 1), 4),
@@ -424,6 +441,21 @@ def _pattern_table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def _feet_by_half(halves: dict | None) -> list[str]:
+    """Sliding and contact score by half: the development half chose the clean-up."""
+    if not halves:
+        return []
+    return [
+        "By half (each half's own ground level), real / generated: "
+        + "; ".join(
+            f"{h}: sliding {v['sliding']['real']:.2f} / {v['sliding']['generated']:.2f} cm/s, "
+            f"contact score {v['contact']['real']:.3f} / {v['contact']['generated']:.3f}"
+            for h, v in halves.items()
+        )
+        + "."
+    ]
+
+
 def markdown(report: dict) -> str:
     lines = [f"**dance** ({report['model']})", ""]
     if "generated_set" in report:
@@ -507,6 +539,7 @@ def _held_out_lines(report: dict) -> list[str]:
         "",
         "Foot contact score: EDGE's physical foot contact score (x 10^4, 5-s pieces; lower: "
         "the hips accelerate only while a foot is planted).",
+        *_feet_by_half(report.get("feet_by_half")),
         "",
         *DM.distance_table(report["feature_distances"]),
     ]
