@@ -38,6 +38,7 @@ from motion.skeleton import Motion
 BODY = np.arange(1, len(C.JOINTS))
 KINETIC_WINDOW = 2  # frames each side of the velocity and acceleration averages
 EPS = 1e-10
+STD_FLOOR = 1e-9  # a reference std at or under this: the feature is constant there
 
 
 def body_positions(motion: Motion) -> np.ndarray:
@@ -203,15 +204,19 @@ def dance_features(motion: Motion) -> dict[str, np.ndarray]:
 
 
 class Normaliser:
-    """The papers' normalisation: each feature less the reference set's mean, over its std."""
+    """The papers' normalisation: each feature less the reference set's mean, over its std;
+    a feature the reference never varies (a relation no real piece shows: root in front of
+    the ankles' and neck's plane) is only centred, not divided by ``EPS``: one generated
+    waltz piece holding it in 3 % of its frames had made the waltz's FID_g 10^14."""
 
     def __init__(self, reference: np.ndarray) -> None:
         reference = np.asarray(reference, dtype=np.float64)
         self.mean = reference.mean(axis=0)
-        self.std = reference.std(axis=0)
+        std = reference.std(axis=0)
+        self.std = np.where(std > STD_FLOOR, std, 1.0)
 
     def __call__(self, features: np.ndarray) -> np.ndarray:
-        return (np.asarray(features, dtype=np.float64) - self.mean) / (self.std + EPS)
+        return (np.asarray(features, dtype=np.float64) - self.mean) / self.std
 
 
 def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:

@@ -92,6 +92,8 @@ def test_diversity_and_normaliser():
     assert DM.diversity(triangle) == pytest.approx(1.0)
     norm = DM.Normaliser(np.array([[1.0, 10.0], [3.0, 10.0]]))
     assert np.allclose(norm(np.array([[3.0, 10.0]])), [[1.0, 0.0]])
+    # a feature constant in the reference is centred, not blown up by a zero std
+    assert np.allclose(norm(np.array([[3.0, 10.03]])), [[1.0, 0.03]])
 
 
 def test_foot_contact_score_punishes_a_body_pushed_with_no_foot_planted():
