@@ -114,8 +114,8 @@ class ServiceError(Exception):
     (``slug``), so ``NotReady("models are loading")`` is enough; extension members are
     keyword arguments (``limit=...``), ``headers`` are added to the response.
 
-    It is plain data (status, type, title, detail, headers, extension members): engines and
-    the clip toolkit raise it without knowing HTTP, and :mod:`service.problems` answers it.
+    It is plain data (status, type slug, title, detail, headers, extension members): engines
+    and the clip toolkit raise it without knowing HTTP, and :mod:`service.problems` answers it.
     """
 
     slug: ClassVar[str] = "internal-error"
@@ -130,11 +130,6 @@ class ServiceError(Exception):
         self.detail = detail
         self.headers = dict(headers or {})
         self.ext = ext
-
-    @property
-    def type(self) -> str:
-        """The problem's type URI."""
-        return PROBLEM_BASE + self.slug
 
     def __str__(self) -> str:
         return f"{self.status_code} {self.title}: {self.detail}"
