@@ -93,7 +93,10 @@ def test_dance_evaluation_records_its_summary(models):
         "foot_sliding_cm_s": {"real": 9.0, "generated": 6.0},
         "foot_contact_score": {"real": 0.9, "generated": 0.8},
         "feature_distances": {"test": {"kinetic": 1.5}, "dev": {"kinetic": 9.9}},
-        "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25},
+        "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25,
+                           "confusion": [[1]],
+                           "by_half": {"dev": {"generated": 0.5, "confusion": [[1]]},
+                                       "test": {"generated": 0.75, "confusion": [[1]]}}},
         "ten_minutes": {"frames": 18000, "per_30s_min": 26.3},
         "generated_set": {"songs": [
             {"f_measure": 0.9, "passes": True, "dances": [{"stalls": 0}]},
@@ -112,6 +115,12 @@ def test_dance_evaluation_records_its_summary(models):
     assert figures["shared_songs"]["songs"] == 2 and figures["shared_songs"]["stalls"] == 1
     assert figures["shared_songs"]["passing_reference_beats"] == 1
     assert figures["feature_distances_test_half"] == {"kinetic": 1.5}
+    assert figures["genre_accuracy"] == {
+        "generated": 0.25,
+        "real_held_out": 1.0,
+        "chance": 0.25,
+        "test_half": {"generated": 0.75},
+    }
     assert figures["foot_contact_score"]["generated"] == 0.8
     assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
