@@ -89,6 +89,18 @@ class StyleJudge:
         return self.classifier.log_probabilities(frame_features(motion))
 
 
+def held_out_record(clip, style: str, group: str, logp: np.ndarray) -> dict:
+    """One real take the judge did not learn from, with how its stand-in named it."""
+    return {
+        "take": clip.take,
+        "dataset": clip.dataset,
+        "content": clip.content,
+        "style": style,
+        "group": group,
+        "logp": logp,
+    }
+
+
 def train_judge(clips: list) -> StyleJudge:
     """:class:`StyleJudge` of real Bandai ``clips`` (merged style labels, mirrors added)."""
     feats = [frame_features(c.motion) for c in clips]
@@ -107,16 +119,8 @@ def train_judge(clips: list) -> StyleJudge:
                 f"holding out {group} leaves styles {set(judge.classes) - set(fold.classes)} unseen"
             )
         for i in (i for i, g in enumerate(groups) if g == group):
-            c = clips[i]
             judge.held_out.append(
-                {
-                    "take": c.take,
-                    "dataset": c.dataset,
-                    "content": c.content,
-                    "style": labels[i],
-                    "group": group,
-                    "logp": fold.log_probabilities(feats[i]),
-                }
+                held_out_record(clips[i], labels[i], group, fold.log_probabilities(feats[i]))
             )
     return judge
 
@@ -219,16 +223,8 @@ def train_library_judge(clips: list) -> StyleJudge:
             "have only held-out takes: the judge's reference could not name them"
         )
     for i in held:
-        c = clips[i]
         judge.held_out.append(
-            {
-                "take": c.take,
-                "dataset": c.dataset,
-                "content": c.content,
-                "style": labels[i],
-                "group": "held-out",
-                "logp": twin.log_probabilities(feats[i]),
-            }
+            held_out_record(clips[i], labels[i], "held-out", twin.log_probabilities(feats[i]))
         )
     return judge
 
