@@ -13,6 +13,8 @@ import shutil
 import subprocess
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -123,6 +125,21 @@ class Container:
 
     def remove(self) -> None:
         docker("rm", "-f", self.name, check=False)
+
+
+@contextmanager
+def serving(volume: str, image: str = IMAGE) -> Iterator[Container]:
+    """A ready container of ``image`` on ``volume``, its log printed if a test fails, always
+    removed."""
+    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"}, image=image)
+    try:
+        wait_ready(box.url)
+        yield box
+    except BaseException:
+        print(box.logs())
+        raise
+    finally:
+        box.remove()
 
 
 def counter(exposition: str, name: str, **labels: str) -> float:

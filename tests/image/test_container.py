@@ -22,13 +22,12 @@ from tests.image.containers import (
     IMAGE,
     STYLES_DIR,
     UID,
-    Container,
     counter,
     docker,
     gauge,
     needs_image,
+    serving,
     unique,
-    wait_ready,
 )
 from tests.rigs import FIXTURE
 from training.songs import encoded, song
@@ -50,30 +49,16 @@ def volume():
 
 @pytest.fixture(scope="module")
 def container(volume):
-    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"})
-    try:
-        wait_ready(box.url)
+    with serving(volume) as box:
         yield box
-    except BaseException:
-        print(box.logs())
-        raise
-    finally:
-        box.remove()
 
 
 @pytest.fixture(scope="module")
 def replacement(volume):
     """A second container on the same volume, started when a test first asks for it (after
     the first is removed); the shutdown test ends it."""
-    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"})
-    try:
-        wait_ready(box.url)
+    with serving(volume) as box:
         yield box
-    except BaseException:
-        print(box.logs())
-        raise
-    finally:
-        box.remove()
 
 
 @pytest.fixture(scope="module")

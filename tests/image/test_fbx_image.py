@@ -8,7 +8,7 @@ import httpx
 import pytest
 
 from tests.fbx_files import blender_reads, make_fbx_files, require_bpy
-from tests.image.containers import FBX_IMAGE, REASON, UID, Container, docker, unique, wait_ready
+from tests.image.containers import FBX_IMAGE, REASON, UID, docker, serving, unique
 from tests.rigs import FIXTURE
 
 MAX_IMAGE_BYTES = 1.7e9  # docker's "MB": the slim image's 0.62 GB and Blender's 0.94 GB
@@ -26,15 +26,10 @@ pytestmark = pytest.mark.skipif(FBX_REASON is not None, reason=FBX_REASON or "")
 def container():
     volume = unique("motion-style-test-styles")
     docker("volume", "create", volume)
-    box = Container(volume, env={"MOTION_INTRA_OP_THREADS": "2"}, image=FBX_IMAGE)
     try:
-        wait_ready(box.url)
-        yield box
-    except BaseException:
-        print(box.logs())
-        raise
+        with serving(volume, image=FBX_IMAGE) as box:
+            yield box
     finally:
-        box.remove()
         docker("volume", "rm", "-f", volume, check=False)
 
 
