@@ -340,10 +340,7 @@ def within_actor(held_out: list[dict], classes: list[str]) -> dict:
 def reference(judge: StyleJudge) -> dict:
     """The judge's leave-action-out figures on real Bandai takes ("real clips")."""
     held = judge.held_out
-    figures = recognition(
-        [h["style"] for h in held], np.array([h["logp"] for h in held]), judge.classes
-    )
-    figures.pop("predicted")
+    figures = held_out_reference(judge)
     figures.pop("confusion")
     figures["by_action_group"] = {
         g: share(
