@@ -24,16 +24,15 @@ is nearest its style's, the fast networks' fit). Checkpoints live in ``--work``;
 the command continues where it stopped: a stage from its last checkpoint (weights, optimiser
 and random state), finished stages and styles skipped. Progress bars give an ETA;
 TensorBoard logs go to ``--runs``. ``--device auto`` takes CUDA where torch sees it.
-Under ``torchrun --nproc_per_node N -m model_export.train_library ...`` the translator
-trains on N processes (``training.distributed``: gloo on CPUs, NCCL on GPUs) and the first
-one goes on to export and distil.
+Under ``torchrun --nproc_per_node N -m model_export.train_library ...`` both families
+train on N processes (``training.distributed``: gloo on CPUs, NCCL on GPUs): the
+translator, then each fast network in turn; the first process exports, the others wait.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -132,18 +131,20 @@ def provenance(args, library_hash: str) -> tuple[list[str], dict]:
     return data, extra
 
 
-def train_fast(args, styles: list[str]) -> Path:
-    from training import fast_style
+def train_fast(args, styles: list[str], device: str) -> Path:
+    from training import distributed, fast_style
 
     ckpt_dir = args.work / "fast"
     todo = [s for s in styles if not (ckpt_dir / f"style_{s}.pt").exists()]
+    todo = distributed.gather(todo)[0]  # the first process's view, everywhere
     if todo:
         flags = [f"--style={s}" for s in todo]
         flags += ["--steps", str(args.fast_steps), "--jobs", str(args.jobs)]
         flags += ["--threads", str(args.threads), "--checkpoint-dir", str(ckpt_dir)]
-        flags += ["--log-dir", str(args.runs / "fast")]
+        flags += ["--log-dir", str(args.runs / "fast"), "--device", device]
         flags += ["--models-dir", str(args.out), "--library", str(args.library)]
-        print(f"fast networks: {len(todo)} of {len(styles)} styles to train", flush=True)
+        if distributed.rank() == 0:
+            print(f"fast networks: {len(todo)} of {len(styles)} styles to train", flush=True)
         fast_style.main(flags)
     return ckpt_dir
 
@@ -151,38 +152,30 @@ def train_fast(args, styles: list[str]) -> Path:
 def train_main(argv: list[str]) -> int:
     import torch
 
-    from model_export import fast as export_fast
-    from model_export import translator as export_translator
+    from training import distributed, library_check
     from training import library as L
-    from training import library_check
 
     args = parse_args(argv)
     report = library_check.check(args.library, measure=False)
     if not report.ok:
         print(library_check.render(report))
         return 1
-    device = device_of(args.device)
+    device = distributed.start(device_of(args.device))
     torch.set_num_threads(args.threads)
     library, _ = L.read_labels(args.library)
-    clips = L.read_library(args.library)
     data, extra = provenance(args, library.content_hash())
     checkpoint = train_translator(args, device)
-    if int(os.environ.get("RANK", "0")) > 0:
-        return 0  # under torchrun: the first process exports and distils
-    args.out.mkdir(parents=True, exist_ok=True)
-    translator = export_translator.export(
-        checkpoint,
-        args.out,
-        clips,
-        name=f"translator-{args.name}",
-        training_data=data,
-        licence=args.licence,
-        extra=extra,
-        measure_smoothing=False,
-        gains={},  # Bandai's own were chosen on Bandai's evaluation
+    translator = (
+        export_translator(args, checkpoint, data, extra) if distributed.rank() == 0 else None
     )
+    translator = distributed.gather(translator)[0]  # the others wait for the export
     styles = list(translator["extra"]["styles"])
-    ckpt_dir = train_fast(args, styles)
+    ckpt_dir = train_fast(args, styles, device)
+    if distributed.rank() > 0:
+        distributed.stop()
+        return 0
+    from model_export import fast as export_fast
+
     fast = export_fast.export(
         ckpt_dir,
         args.out,
@@ -202,7 +195,27 @@ def train_main(argv: list[str]) -> int:
         "validation": translator["metrics"].get("validation", {}),
     }
     print(json.dumps(summary, indent=1))
+    distributed.stop()
     return 0
+
+
+def export_translator(args, checkpoint: Path, data: list[str], extra: dict) -> dict:
+    """The translator's manifest entry, its ONNX and tables written into ``args.out``."""
+    from model_export import translator as export
+    from training import library as L
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    return export.export(
+        checkpoint,
+        args.out,
+        L.read_library(args.library),
+        name=f"translator-{args.name}",
+        training_data=data,
+        licence=args.licence,
+        extra=extra,
+        measure_smoothing=False,
+        gains={},  # Bandai's own were chosen on Bandai's evaluation
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

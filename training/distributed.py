@@ -27,6 +27,10 @@ def rank() -> int:
     return dist.get_rank() if dist.is_initialized() else 0
 
 
+def started() -> bool:
+    return dist.is_initialized()
+
+
 def start(device: str) -> str:
     """Joins the process group ``torchrun`` describes (if any); the device this process
     trains on (``cuda:<LOCAL_RANK>`` for CUDA)."""

@@ -3,6 +3,7 @@ translator.
 
     python -m training.fast_style --all [--jobs 2] [--steps N]
     python -m training.fast_style --style angry
+    torchrun --nproc_per_node 2 -m training.fast_style --all
 
 Each style's network (``training.fast_common.StyleNet``) learns what the translator's
 restyler does for that style's named code: from the same input (the content's head, hands,
@@ -14,6 +15,12 @@ take and the first ``DANCE_SECONDS`` of each Dance with Melody take, mirrored, a
 translator on every clip once).
 
 Why not holden2017's positions, projection and IK fit: docs/translator.md.
+
+Under ``torchrun`` (``training.distributed``) the processes train one style at a time
+together: each makes the targets of its own share of the content and draws its batches
+there (as ``DistributedSampler`` shares a data set), the batch split between them so that
+N processes take the steps of one with the same total batch; their gradients are averaged
+after each backward pass. Without it, ``--jobs`` trains that many styles at once instead.
 
 Writes ``checkpoints/fast/style_<name>.pt`` (weights only) and logs to
 ``runs/fast/style_<name>``. ``MOTION_SMOKE=1`` runs a few steps on four takes.
@@ -36,6 +43,7 @@ from tqdm import tqdm
 
 from motion import canonical as C
 from motion import features as Fe
+from training import distributed
 from training import fast_common as FC
 
 DANCE_SECONDS = 60  # of each Dance with Melody take, in the content
@@ -60,6 +68,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--threads", type=int, default=None, help="torch threads per process")
     p.add_argument("--jobs", type=int, default=1, help="styles trained at once, one process each")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N")
     p.add_argument(
         "--models-dir", type=Path, help="the teacher translator's models folder (the shipped)"
     )
@@ -118,12 +127,13 @@ def targets(
     """Per content clip, the restyler's input ``(F, CONTROL_CHANNELS)`` and the teacher
     translator's output for ``style``'s named code ``(F, OUTPUT_CHANNELS)``, standardised:
     the shipped translator on :func:`content_motions`, or that in ``models_dir`` on
-    ``library``'s."""
+    ``library``'s. Under ``torchrun``, this process's share of the clips alone."""
     from training.judges import load_engine
 
     engine = load_engine("translator", models_dir)[0]
     code = engine.code_of_name(style).code
-    controls = [engine.restyler_input(m) for m in content_motions(library)]
+    share = content_motions(library)[distributed.rank() :: distributed.world()]
+    controls = [engine.restyler_input(m) for m in share]
     return controls, [engine.restyled(x, code) for x in controls]
 
 
@@ -137,9 +147,11 @@ class StyleTrainer:
 
     def batch(self, rng: np.random.Generator) -> tuple[torch.Tensor, torch.Tensor]:
         """Windows ``(batch, channels, window)``, clips drawn in proportion to their frames,
-        shorter ones padded with their first and last frames."""
+        shorter ones padded with their first and last frames; this process's part of the
+        batch under ``torchrun``."""
         xs, ys, length = [], [], self.args.window
-        for k in rng.choice(len(self.control), size=self.args.batch, p=self.weights):
+        size = -(-self.args.batch // distributed.world())
+        for k in rng.choice(len(self.control), size=size, p=self.weights):
             x, y = self.control[k], self.output[k]
             pad = max(0, length - len(x))
             if pad:
@@ -150,31 +162,39 @@ class StyleTrainer:
             ys.append(y[start : start + length].T)
         return torch.tensor(np.stack(xs)), torch.tensor(np.stack(ys))
 
-    def train(self, log: FC.Logger) -> tuple[FC.StyleNet, dict]:
-        args = self.args
+    def train(self, log: FC.Logger | None) -> tuple[FC.StyleNet, dict]:
+        args, rank = self.args, distributed.rank()
         torch.manual_seed(args.seed)
-        rng = np.random.default_rng(args.seed)
-        net = FC.StyleNet(hidden=args.hidden)
+        rng = np.random.default_rng([args.seed, rank] if rank else args.seed)
+        net = FC.StyleNet(hidden=args.hidden).to(args.device)
+        distributed.broadcast_parameters(net)
         opt = torch.optim.Adam(net.parameters(), lr=args.lr)
         steps = min(args.steps, args.max_steps or args.steps)
         sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps, eta_min=args.lr * 0.1)
         started, avg, step = time.time(), None, 0
-        for step in tqdm(range(1, steps + 1), desc=f"style {self.style}", mininterval=10):
-            x, y = self.batch(rng)
+        progress = tqdm(range(1, steps + 1), desc=f"style {self.style}", mininterval=10,
+                        disable=rank > 0)  # fmt: skip
+        for step in progress:
+            x, y = (t.to(args.device) for t in self.batch(rng))
             loss = (net(x) - y)[..., EDGE:-EDGE].abs().mean()
             opt.zero_grad()
             loss.backward()
+            distributed.average_gradients(net.parameters())
             opt.step()
             sched.step()
             avg = loss.item() if avg is None else 0.98 * avg + 0.02 * loss.item()
-            if step % 20 == 0:
+            if step % 20 == 0 and log is not None:
                 log.scalars(step, {"train/l1": avg})
+        spread = distributed.spread(net)
+        if spread > 0:
+            raise RuntimeError(f"the processes' weights drifted apart ({spread:.2e})")
         result = {
             "steps": step,
             "minutes": round((time.time() - started) / 60, 2),
             "train_l1": round(avg, 6),
+            "processes": distributed.world(),
         }
-        return net, result
+        return net.cpu(), result
 
 
 def train_style(name: str, args: argparse.Namespace) -> dict:
@@ -183,8 +203,12 @@ def train_style(name: str, args: argparse.Namespace) -> dict:
     if args.threads:
         torch.set_num_threads(args.threads)
     control, output = targets(name, args.models_dir, args.library)
-    log = FC.Logger(f"style_{name}", Path(args.log_dir))
+    first = distributed.rank() == 0
+    log = FC.Logger(f"style_{name}", Path(args.log_dir)) if first else None
     net, result = StyleTrainer(name, control, output, args).train(log)
+    if not first:
+        distributed.barrier()  # the first process's file is written before anyone goes on
+        return result
     log.close()
     result["trained_at"] = dt.date.today().isoformat()
     ckpt_dir = Path(args.checkpoint_dir)
@@ -200,6 +224,7 @@ def train_style(name: str, args: argparse.Namespace) -> dict:
         f"{path}.tmp",
     )
     os.replace(f"{path}.tmp", path)
+    distributed.barrier()
     print(f"style {name}: {json.dumps(result)}", flush=True)
     return result
 
@@ -209,8 +234,13 @@ def main(argv: list[str] | None = None) -> dict:
     if FC.smoke():
         args.max_steps = args.max_steps or 3
     names = style_names(args.models_dir) if args.all else args.style
-    if args.jobs == 1:
-        return {name: train_style(name, args) for name in names}
+    owns_group = not distributed.started()
+    args.device = distributed.start(args.device)
+    if distributed.world() > 1 or args.jobs == 1:
+        results = {name: train_style(name, args) for name in names}
+        if owns_group:
+            distributed.stop()
+        return results
     # one style per process, each seeded as alone (the same networks as one after another);
     # spawned, as torch's thread pools do not survive a fork
     context = multiprocessing.get_context("spawn")

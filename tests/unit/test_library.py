@@ -575,3 +575,31 @@ def test_two_processes_train_one_translator_under_torchrun(good_library, tmp_pat
     assert payload["processes"] == 2 and payload["stages"] == ["paired"]
     rngs = torch.load(f"{out}.state", weights_only=False)["rngs"]
     assert len(rngs) == 2 and rngs[0] != rngs[1]
+
+
+@pytest.mark.slow
+def test_two_processes_train_both_families_by_the_one_command(good_library, tmp_path):
+    """torchrun, gloo, 2 CPU processes through the one command: the translator, then each
+    fast network trained by both processes together (each on its share of the clips, the
+    weights equal to the last bit), exported once by the first."""
+    torch = pytest.importorskip("torch")
+    torchrun = Path(sys.executable).with_name("torchrun")
+    if not torchrun.exists():
+        pytest.skip("torchrun is not installed beside this Python")
+    env = {**__import__("os").environ, "MOTION_SMOKE": "1", "PYTHONPATH": str(REPO),
+           "MOTION_CACHE_DIR": str(tmp_path / "cache")}  # fmt: skip
+    result = subprocess.run(
+        [str(torchrun), "--nproc_per_node", "2", "-m", "model_export.train_library",
+         *_train_argv(good_library, tmp_path)],
+        capture_output=True, text=True, cwd=REPO, timeout=900, env=env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert result.stdout.count("fast networks: 2 of 2 styles to train") == 1
+    assert torch.load(tmp_path / "work" / "translator.pt", weights_only=False)["processes"] == 2
+    for style in ("brisk", "slow"):
+        saved = torch.load(tmp_path / "work" / "fast" / f"style_{style}.pt", weights_only=False)
+        assert saved["result"]["processes"] == 2
+    out = tmp_path / "models" / "studio"
+    models = {m["name"]: m for m in json.loads((out / "manifest.json").read_text())["models"]}
+    assert set(models) == {"translator-studio", "fast-studio"}
+    assert sorted(models["fast-studio"]["extra"]["styles"]) == ["brisk", "slow"]

@@ -464,6 +464,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Train
 
 def main(argv: list[str] | None = None) -> int:
     args, cfg = parse_args(argv)
+    owns_group = not distributed.started()  # else the caller goes on with it
     args.device = distributed.start(args.device)
     first = distributed.rank() == 0
     if os.environ.get("MOTION_SMOKE"):
@@ -524,7 +525,8 @@ def main(argv: list[str] | None = None) -> int:
     if distributed.world() > 1:
         if first:
             print(f"{distributed.world()} processes, weights apart by at most {spread:.2e}")
-        distributed.stop()
+        if owns_group:
+            distributed.stop()
         if spread > 0:
             raise RuntimeError(f"the processes' weights drifted apart ({spread:.2e})")
     if writer is not None:
