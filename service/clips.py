@@ -56,8 +56,8 @@ class GameOptions:
     """What a game asks of a restyled clip: ``loop`` (auto: found from the clip, true: it
     loops, false: it does not) and ``root_motion`` (keep, or in_place)."""
 
-    loop: str = "auto"
-    root_motion: str = "keep"
+    loop: LoopMode = "auto"
+    root_motion: RootMotion = "keep"
 
 
 @dataclass
@@ -98,7 +98,7 @@ class Clip:
     reference: Motion | None = None  # leading reference frames, cut off ``original``
     loop: loops.Loop | None = None  # a cycle: ``canonical`` is closed, 30 fps end to end
     closing: bool = False  # ``original`` (an open cycle) gained its first frame at the end
-    root_motion: str = "keep"
+    root_motion: RootMotion = "keep"
     warnings: list[str] = field(default_factory=list)
 
     @property
