@@ -31,7 +31,7 @@ from motion import canonical as C
 from motion.skeleton import Motion
 
 REPO = Path(__file__).resolve().parent.parent
-CACHE_VERSION = "1"
+CACHE_VERSION = "2"
 
 
 def data_dir() -> Path:
@@ -353,7 +353,8 @@ def dwm_canonical_positions(points: np.ndarray) -> np.ndarray:
     put["Shoulder_R"] = neck_base + 0.5 * (p[..., 3, :] - neck_base)
     for name, value in put.items():
         out[..., C.INDEX[name], :] = value
-    out[..., 0, :] = hip_mid * np.array([1.0, 0.0, 1.0])  # root on the floor below the hips
+    # joint_Root stays at the origin (zeros): the Hips carry the dancer's path, which a Clip
+    # keeps; a root following the hips on the floor had taken the path, and a Clip drops it
     return out
 
 

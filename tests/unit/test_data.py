@@ -80,6 +80,18 @@ def test_dance_with_melody_fits_the_canonical_skeleton():
         assert np.ptp(lengths) < 1e-4  # rotations are stored as float32
 
 
+def test_dance_with_melody_keeps_the_dancers_path():
+    """The dancers cross the floor (metres); the clip's hips follow the markers' hips there.
+    A root joint carrying the path (which a Clip drops) had left every dance in place."""
+    data_path("dance-with-melody")
+    clip = next(c for c in data.load_dance_with_melody() if c.name == "DANCE_W_14")
+    points, _ = data.read_dwm_folder(data.data_dir() / "dance-with-melody" / "DANCE_W_14")
+    markers = 0.5 * (points[:, 7] + points[:, 16])[:, [0, 2]]  # the hip points' middle
+    hips = K.global_positions(clip.motion)[:, C.INDEX["Hips"]][:, [0, 2]]
+    assert np.ptp(markers, axis=0).min() > 100.0
+    np.testing.assert_allclose(np.ptp(hips, axis=0), np.ptp(markers, axis=0), atol=5.0)
+
+
 def test_dance_audio_covers_the_motion():
     data_path("dance-with-melody")
     clip = next(c for c in data.load_dance_with_melody() if c.name == "DANCE_W_14")
