@@ -5,9 +5,10 @@ its own contact channels stay near zero (they regress to the mean of a 13% share
 ballroom dancer always stands on at least one foot, so :func:`predict_contacts` picks a
 supporting foot every frame (the slower one, with hysteresis and a shortest stance), adds
 the other foot where it too is still, and splits each stance into heel and toe by which
-is lower. :func:`plant_feet` then stands the body on the floor there (the hips moved up or
-down), holds each contact still by leg IK, and lifts every foot in the air clear of the
-floor. The figures that chose it: docs/dance_alignment.md (Feet).
+is lower. :func:`travel_on_support` carries the body across the floor over its planted
+feet (the network dances in place), and :func:`plant_feet` then stands it on the floor
+there (the hips moved up or down), holds each contact still by leg IK, and lifts every
+foot in the air clear of the floor. The figures that chose it: docs/dance_alignment.md (Feet).
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ CLEARANCE = 0.05  # leg lengths: feet in the air lifted at least this far over t
 BLEND_SECONDS = 0.1  # pin_feet's ramps, replaced over a swing by spread_over_swings
 LIFT_RAMP_SECONDS = 0.04  # the clearance eases in over this from a contact's edge...
 LIFT_SMOOTH = 1.5  # ...and the lift is smoothed by a Gaussian of this sigma (frames)
+TRAVEL_PASSES = 3  # contacts predicted, the body carried over them: twice more on the result
+TRAVEL_SMOOTH = 5.0  # Gaussian sigma (frames) of the body's steps over its planted feet
 
 
 def _speeds(gpos: np.ndarray, fps: float) -> np.ndarray:
@@ -121,6 +124,33 @@ def floor_levels(gpos: np.ndarray, contacts: np.ndarray) -> np.ndarray:
         if contacts[:, i].any():
             out[i] = np.median(gpos[contacts[:, i], j, 1])
     return out
+
+
+def travel_on_support(motion: Motion, contacts: np.ndarray) -> Motion:
+    """``motion`` with its hips carried across the floor by its planted feet: each frame the
+    body moves by minus the mean floor displacement of the feet in contact at that frame and
+    the next (``contacts (F, 4)``), smoothed over :data:`TRAVEL_SMOOTH` frames, so a foot on
+    the floor stays put and the body travels over it. The network learnt its dances in
+    place (its training dances had lost their path across the floor), so where a real
+    dancer's body passes over the standing foot, its standing foot slides back under the
+    hips instead."""
+    contacts = np.asarray(contacts, dtype=bool)
+    gpos = CT.canonical_foot_positions(motion)[:, FEET][..., [0, 2]]
+    frames = motion.num_frames
+    if frames < 2:
+        return motion
+    point = 0.5 * (gpos[:, 0::2] + gpos[:, 1::2])  # (F, 2 feet, 2): between heel and toe
+    planted = contacts[:, 0::2] | contacts[:, 1::2]
+    both = (planted[1:] & planted[:-1]).astype(np.float64)  # (F - 1, 2)
+    step = np.diff(point, axis=0)  # (F - 1, 2, 2)
+    weight = both.sum(axis=1, keepdims=True)
+    slide = (step * both[..., None]).sum(axis=1) / np.maximum(weight, 1.0)
+    slide = gaussian_filter1d(slide, TRAVEL_SMOOTH, axis=0, mode="nearest")
+    path = np.zeros((frames, 3))
+    path[1:, [0, 2]] = -np.cumsum(slide, axis=0)
+    lpos = motion.lpos.copy()
+    lpos[:, C.INDEX["Hips"]] += path
+    return motion.replace(lpos=lpos)
 
 
 def plant_feet(motion: Motion, contacts: np.ndarray) -> Motion:
@@ -221,6 +251,10 @@ def _frames_from(mask: np.ndarray) -> np.ndarray:
 
 def clean_feet(motion: Motion, network: np.ndarray | None = None) -> Motion:
     """The dance's foot clean-up: :func:`predict_contacts` (with the network's contacts
-    ``network (F, 4)`` bool, when given), then :func:`plant_feet`."""
-    gpos = CT.canonical_foot_positions(motion)
-    return plant_feet(motion, predict_contacts(gpos, motion.fps, network))
+    ``network (F, 4)`` bool, when given), the body carried over them
+    (:func:`travel_on_support`), then :func:`plant_feet`."""
+    moved = motion
+    for _ in range(TRAVEL_PASSES):  # contacts read again on the travelling body: clearer
+        contacts = predict_contacts(CT.canonical_foot_positions(moved), motion.fps, network)
+        moved = travel_on_support(motion, contacts)
+    return plant_feet(moved, contacts)

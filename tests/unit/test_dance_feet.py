@@ -84,11 +84,44 @@ def test_a_gliding_walk_is_planted(gliding_walk):
         free = FT._frames_from(planted) > ramp
         low = after[:, FT.FEET[2 * side : 2 * side + 2], 1] - levels[2 * side : 2 * side + 2]
         assert free.any() and (low[free].min(axis=1) > 0.8 * FT.CLEARANCE * FT.LEG).all()
-    # the travel is the clip's; only the hips' height and the legs change
-    np.testing.assert_allclose(after[:, HIPS][:, [0, 2]], before[:, HIPS][:, [0, 2]], atol=1e-9)
+    # the body travels as far as its steps carry it (the walk's path), not the glide's
+    travel = [K.global_positions(m)[-1, HIPS] - K.global_positions(m)[0, HIPS] for m in (walk, out)]
+    walked, carried = (np.linalg.norm(t[[0, 2]]) for t in travel)
+    assert abs(carried - walked) < 0.1 * walked, (carried, walked)
     np.testing.assert_allclose(out.lrot[:, C.INDEX["Spine"]], glide.lrot[:, C.INDEX["Spine"]])
     bones = [np.linalg.norm(p[:, 2:] - p[:, C.PARENTS[2:]], axis=-1) for p in (before, after)]
     np.testing.assert_allclose(bones[1], bones[0], atol=1e-6)
+
+
+def test_a_dance_in_place_travels_over_its_planted_feet(gliding_walk):
+    """The dance network learnt in place: its standing foot slides back under the hips.
+    The clean-up carries the body forward over it instead, the way the dancer went."""
+    walk, _ = gliding_walk
+    lpos = walk.lpos.copy()
+    lpos[:, HIPS, [0, 2]] = lpos[:1, HIPS, [0, 2]]
+    in_place = walk.replace(lpos=lpos)
+    out = FT.clean_feet(in_place)
+    walked = K.global_positions(walk)[-1, HIPS] - K.global_positions(walk)[0, HIPS]
+    carried = K.global_positions(out)[-1, HIPS] - K.global_positions(out)[0, HIPS]
+    walked, carried = walked[[0, 2]], carried[[0, 2]]
+    cosine = walked @ carried / (np.linalg.norm(walked) * np.linalg.norm(carried))
+    assert cosine > 0.95 and np.linalg.norm(carried) > 0.6 * np.linalg.norm(walked)
+    assert CT.canonical_foot_sliding(out) < 0.3 * CT.canonical_foot_sliding(in_place)
+
+
+def test_travel_holds_a_planted_foot(gliding_walk):
+    """A standing pose sliding back at 50 cm/s on its planted left foot is carried forward
+    by as much: the foot stays put."""
+    walk, _ = gliding_walk
+    frames = walk.num_frames
+    lpos = np.repeat(walk.lpos[:1], frames, axis=0)
+    lpos[:, HIPS, 0] -= 50.0 * np.arange(frames) / walk.fps
+    sliding = walk.replace(lrot=np.repeat(walk.lrot[:1], frames, axis=0), lpos=lpos)
+    contacts = np.zeros((frames, 4), dtype=bool)
+    contacts[:, :2] = True
+    out = FT.travel_on_support(sliding, contacts)
+    foot = K.global_positions(out)[:, C.INDEX["Foot_L"]]
+    assert np.ptp(foot[:, 0]) < 1e-6 and np.ptp(foot[:, 2]) < 1e-6
 
 
 def test_no_motion_no_contacts():
