@@ -192,6 +192,29 @@ def segments(motion: Motion, seconds: float, start: int = 0, stop: int | None = 
 
 
 FEATURES = ("kinetic", "geometric")
+KINETIC_NAMES = tuple(f"{C.JOINTS[j]} {kind}" for j in BODY
+                      for kind in ("horizontal speed²", "vertical speed²", "acceleration"))  # fmt: skip
+GEOMETRIC_NAMES = (
+    "right hand moves forward", "left hand moves forward", "right hand above neck",
+    "left hand above neck", "right hand moves up", "left hand moves up", "right elbow bent",
+    "left elbow bent", "hands apart", "hands approach", "right hand moves from root",
+    "left hand moves from root", "right hand fast", "left hand fast", "right foot in front",
+    "left foot in front", "right foot raised", "left foot raised", "feet apart",
+    "right knee bent", "left knee bent", "right foot fast", "left foot fast", "right arm out",
+    "left arm out", "right leg out", "left leg out", "root behind the feet", "spine horizontal",
+    "right hand low", "left hand low", "root fast",
+)  # fmt: skip
+"""Names of :func:`kinetic_features`' and :func:`geometric_features`' values, in order."""
+GAPS = 3  # the largest feature gaps each distance row reports
+
+
+def feature_gaps(generated: np.ndarray, real: np.ndarray, top: int = GAPS) -> list[int]:
+    """Indices of the ``top`` features that hold a generated set furthest from a real one:
+    the largest terms ``(mean(generated) - mean(real))^2`` of the Frechet distance's mean
+    part (on normalised features, the distance's own units), largest first."""
+    generated, real = np.asarray(generated, np.float64), np.asarray(real, np.float64)
+    term = (generated.mean(axis=0) - real.mean(axis=0)) ** 2
+    return [int(i) for i in np.argsort(-term)[:top]]
 
 
 def dance_features(motion: Motion) -> dict[str, np.ndarray]:
@@ -364,6 +387,15 @@ def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> d
             "diversity_generated": round(diversity(gen), 2),
             "diversity_real": round(diversity(real), 2),
             "diversity_other_songs": round(diversity(other), 2),
+            "largest_gaps": [
+                {
+                    "feature": (KINETIC_NAMES if kind == "kinetic" else GEOMETRIC_NAMES)[i],
+                    "term": round(float((gen[:, i].mean() - real[:, i].mean()) ** 2), 1),
+                    "generated": round(float(feats["generated"][kind][:, i].mean()), 3),
+                    "real": round(float(feats["real"][kind][:, i].mean()), 3),
+                }
+                for i in feature_gaps(gen, real)
+            ],
         }
     return row
 
@@ -393,4 +425,17 @@ def distance_table(distances: dict) -> list[str]:
                 f"{k['diversity_generated']:.1f} / {k['diversity_real']:.1f} | "
                 f"{g['diversity_generated']:.1f} / {g['diversity_real']:.1f} |"
             )
+    lines += ["", "Largest gaps (a feature's term of the distance's mean part, normalised; "
+              "generated / real means of the raw feature, m²/s², m/s² or share of frames):"]  # fmt: skip
+    for half in HALVES:
+        for genre, row in distances[half].items():
+            for kind, label in (("kinetic", "FID_k"), ("geometric", "FID_g")):
+                gaps = row[kind]["largest_gaps"]
+                lines.append(
+                    f"- {half} {genre} {label}: "
+                    + "; ".join(
+                        f"{x['feature']} {x['term']:.1f} ({x['generated']:.3g} / {x['real']:.3g})"
+                        for x in gaps
+                    )
+                )
     return lines

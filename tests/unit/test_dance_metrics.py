@@ -128,3 +128,33 @@ def test_feature_distances_of_a_copy_of_the_real_dance_are_nil():
         for kind in DM.FEATURES:
             assert row[kind]["generated_to_real"] == pytest.approx(0.0, abs=0.01)
             assert row[kind]["other_songs_to_real"] > 1.0
+
+
+def test_feature_gaps_name_the_feature_that_differs():
+    assert len(DM.KINETIC_NAMES) == 63 and len(DM.GEOMETRIC_NAMES) == 32
+    rng = np.random.default_rng(0)
+    real = rng.standard_normal((40, 63))
+    generated = rng.standard_normal((40, 63))
+    hips_h = DM.KINETIC_NAMES.index("Hips horizontal speed²")
+    generated[:, hips_h] += 5.0  # the generated set travels where the real one does not
+    order = DM.feature_gaps(generated, real)
+    assert order[0] == hips_h and len(order) == DM.GAPS
+    term = (generated.mean(0) - real.mean(0)) ** 2
+    assert term[order[1]] >= term[order[2]] and term[order[2]] >= np.delete(term, order).max()
+
+
+def test_a_distance_row_reports_its_largest_gaps():
+    frames = 600
+    t = np.arange(frames) / FPS
+    real = bent(standing(frames), "LowerArm_L", 60 + 50 * np.sin(2 * np.pi * 0.7 * t))
+    # the same dance, its body gliding 1 m/s across the floor
+    path = np.arange(frames)[:, None] / FPS * np.array([100.0, 0.0, 0.0])
+    travelling = real.replace(lpos=real.lpos + np.pad(path[:, None], ((0, 0), (1, 20), (0, 0))))
+    report = DM.feature_distances(
+        [("song", "waltz", real, None, None)], [("waltz", real)], {"song": [travelling]}
+    )
+    gaps = report["dev"]["waltz"]["kinetic"]["largest_gaps"]
+    assert all(g["feature"].endswith("horizontal speed²") for g in gaps)
+    # gliding at 1 m/s adds 1 m²/s² to every joint's mean squared horizontal speed
+    assert all(g["generated"] - g["real"] == pytest.approx(1.0, abs=0.05) for g in gaps)
+    assert any("horizontal speed²" in line for line in DM.distance_table(report))
