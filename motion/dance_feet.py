@@ -38,7 +38,7 @@ BLEND_SECONDS = 0.1  # pin_feet's ramps, replaced over a swing by spread_over_sw
 LIFT_RAMP_SECONDS = 0.04  # the clearance eases in over this from a contact's edge...
 LIFT_SMOOTH = 1.5  # ...and the lift is smoothed by a Gaussian of this sigma (frames)
 TRAVEL_PASSES = 3  # contacts predicted, the body carried over them: twice more on the result
-TRAVEL_SMOOTH = 5.0  # Gaussian sigma (frames) of the body's steps over its planted feet
+TRAVEL_SMOOTH = 4.0  # Gaussian sigma (frames) of the body's steps over its planted feet
 
 
 def _speeds(gpos: np.ndarray, fps: float) -> np.ndarray:
