@@ -24,8 +24,9 @@ self-fed stretches whose length ramps up to ``--cond-frames``, so long generatio
 freezes nor drifts. Losses: rotation/root features, forward-kinematics positions (root-local,
 leg lengths), Laban effort (angular-velocity energy per window, log ratio), foot skating
 under ground-truth contacts, genre cross-entropy. Whole songs are held out by take. With
-``--swap-share`` some music windows are asked another genre and judged by a classifier of
-real dances and a per-genre prior instead (``training.dance_genre``: why and how).
+``--swap-share`` some music windows are asked another genre and judged by a convolutional
+classifier of real dances, a per-genre kinetic prior, a diversity guard and a skating loss
+on their stillest foot instead (``training.dance_genre``: why and how).
 
 Writes ``checkpoints/dance.pt`` (weights, step, config and the feature statistics: what an
 export needs) and the optimiser beside it in ``dance.pt.state`` (for ``--resume``, never
@@ -67,6 +68,8 @@ WEIGHTS = {
     "genre": 0.1,
     "judge": 0.0,
     "prior": 0.0,
+    "diversity": 0.0,
+    "free_skate": 0.0,
 }
 SCHEDULE = Path(__file__).with_name("dance_schedule.json")
 
@@ -210,7 +213,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--hidden", type=int, default=Config.hidden)
     for name, value in WEIGHTS.items():
-        p.add_argument(f"--w-{name}", type=float, default=value, help=f"{name} loss weight")
+        p.add_argument(f"--w-{name.replace('_', '-')}", dest=f"w_{name}", type=float,
+                       default=value, help=f"{name} loss weight")  # fmt: skip
     p.add_argument("--val-every", type=int, default=500)
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--checkpoint", type=Path, default=CHECKPOINT)
@@ -302,13 +306,17 @@ def train_step(
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
-    parts["judge"] = parts["prior"] = torch.zeros(())
+    for k in ("judge", "prior", "diversity", "free_skate"):
+        parts[k] = torch.zeros(())
     if judge is not None and music.any():
-        raw = losses.raw(pred[music][:, args.warm - 1 :])
-        stats = TG.window_statistics(losses.kinematics(raw)[1], raw)
-        parts["judge"] = nn.functional.cross_entropy(judge(stats), asked[music])
-        if swapped.any():
-            parts["prior"] = judge.prior(stats[swapped[music]], asked[swapped])
+        frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
+        parts["judge"] = nn.functional.cross_entropy(judge(frames), asked[music])
+        free = swapped[music]
+        if free.any():
+            parts["prior"] = judge.prior(kinetic[free], asked[swapped])
+            parts["diversity"] = judge.diversity(kinetic[free], asked[swapped])
+            skate = TG.free_skating(pos[free], raw[free], losses.feet)
+            parts["free_skate"] = judge.skating(skate, asked[swapped])
     parts["total"] = sum(weights[k] * parts[k] for k in weights)
     return parts
 
@@ -332,8 +340,7 @@ def validate(model, losses, val_batches, judge=None) -> dict[str, float]:
             other = (genre[music] + 1) % len(DF.MUSIC_GENRES)
             asked = nn.functional.one_hot(other, len(DF.GENRES)).float()
             pred = model.rollout(code[music], asked, motion[music], None, warm=8)
-            raw = losses.raw(pred[:, 7:])
-            named = judge(TG.window_statistics(losses.kinematics(raw)[1], raw)).argmax(-1)
+            named = judge(TG.window_inputs(losses, pred[:, 7:])[0]).argmax(-1)
             judged += int((named == other).sum())
     totals["genre_acc"] = correct / max(count, 1)
     if judge is not None:
@@ -391,7 +398,7 @@ def train(args: argparse.Namespace) -> None:
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
     judge = None
-    if weights["judge"] > 0 or weights["prior"] > 0:
+    if any(weights[k] > 0 for k in ("judge", "prior", "diversity", "free_skate")):
         judge = TG.fit_judge(
             WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
             WindowSampler(val_seqs, stats, args.window, 0.0, 4321),

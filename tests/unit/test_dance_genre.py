@@ -1,5 +1,6 @@
-"""Genre the dance network cannot ignore (training.dance_genre): swapped windows, the judge
-and prior, the genre FiLM layers and fine-tuning a network that had none."""
+"""Genre the dance network cannot ignore (training.dance_genre): swapped windows, the
+convolutional judge, kinetic prior, diversity guard and free skating, the genre FiLM layers
+and fine-tuning a network that had none."""
 
 from __future__ import annotations
 
@@ -43,22 +44,56 @@ def test_swapped_windows_are_music_windows_asked_another_music_genre():
     assert set(asked[swapped].tolist()) == set(range(len(DF.MUSIC_GENRES)))
 
 
-def test_judge_separates_genres_and_the_prior_bounds_each_genre():
+def test_judge_separates_genres_by_their_motion_and_bounds_each_genre():
+    """The convolutional judge tells genres apart by how joints move over time (here, one
+    frequency each, the same mean and deviation), the kinetic prior is zero inside a genre's
+    band and grows outside it, the diversity guard fires only when windows asked one genre
+    collapse together, and skating is penalised only beyond the real windows'."""
     from training import dance_genre as TG
 
     gen = torch.Generator().manual_seed(0)
     genre = torch.arange(400) % 4
+    t = torch.arange(24).float()
+    phase = torch.rand(400, 1, 1, generator=gen) * 6.28
+    freq = (0.6 + 0.4 * genre.float())[:, None, None]
+    frames = torch.sin(freq * t[None, :, None] + phase) + 0.1 * torch.randn(
+        400, 24, 6, generator=gen
+    )
     centres = torch.randn(4, 10, generator=gen) * 3
-    stats = centres[genre] + torch.randn(400, 10, generator=gen)
-    judge = TG.GenreJudge(10)
-    assert judge.fit(stats, genre) > 0.95
+    kinetic = centres[genre] + torch.randn(400, 10, generator=gen)
+    skate = 0.1 + 0.05 * genre.float()
+    judge = TG.ConvJudge(6, 10, width=16)
+    assert judge.fit(frames, kinetic, skate, genre, steps=300) > 0.95
     assert not any(p.requires_grad for p in judge.parameters())
-    inside = centres[genre[:8]]
-    assert float(judge.prior(inside, genre[:8])) == 0.0
-    far = inside + 10.0
-    assert float(judge.prior(far, genre[:8])) > 1.0
-    # a window like genre 1 asked as genre 2 is out of genre 2's band
-    assert float(judge.prior(centres[1:2], torch.tensor([2]))) > 0.0
+    # the window statistics of the other family carry nothing here: every channel's mean
+    # and deviation over the window are the same for each genre
+    assert frames.std(1).mean(-1)[genre == 0].mean() == pytest.approx(
+        frames.std(1).mean(-1)[genre == 3].mean(), abs=0.05)  # fmt: skip
+    z = centres[genre[:8]]
+    assert float(judge.prior(z, genre[:8])) == 0.0
+    assert float(judge.prior(z + 10.0 * judge.kin_std, genre[:8])) > 1.0
+    spread = kinetic[genre == 2]
+    assert float(judge.diversity(spread, genre[genre == 2])) == 0.0
+    same = spread[:1].expand(6, -1) + 0.01 * torch.randn(6, 10, generator=gen)
+    assert float(judge.diversity(same, torch.full((6,), 2))) > 0.5
+    allowed = judge.genre_skate
+    assert float(judge.skating(allowed[:2], torch.tensor([0, 1]))) == 0.0
+    assert float(judge.skating(allowed[:2] + 0.5, torch.tensor([0, 1]))) == pytest.approx(0.5)
+    # no genre is allowed more skating than the median genre
+    assert float(allowed.max()) <= float(torch.median(skate.unique())) + 1e-6
+
+
+def test_free_skating_is_the_stillest_foot_point_on_the_floor():
+    from training import dance_genre as TG
+
+    pos = torch.zeros(1, 11, 5, 3)
+    raw = torch.zeros(1, 11, DF.MOTION_CHANNELS)
+    pos[0, :, 1, 0] = torch.arange(11) / DF.FPS  # point 1 glides at 1 leg length a second
+    pos[0, :, 2, 0] = torch.arange(11) * 2 / DF.FPS
+    assert float(TG.free_skating(pos, raw, [1, 2])[0]) == pytest.approx(1.0)
+    assert float(TG.free_skating(pos, raw, [0, 1])[0]) == 0.0
+    raw[..., DF.VELOCITY.start] = -1.0  # the body travels back as point 1 glides forward
+    assert float(TG.free_skating(pos, raw, [1, 2])[0]) == pytest.approx(0.0, abs=1e-6)
 
 
 def _stats(walk):
@@ -107,9 +142,10 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     seqs = [Sequence(f"walk{g}", g, a, m, True, True) for g in range(len(DF.MUSIC_GENRES))]
     losses = Losses(stats)
     args = TD.parse_args(["--window", "24", "--swap-share", "1.0", "--w-judge", "1", "--w-prior",
-                          "1", "--warm", "4", "--cond-ramp", "1"])  # fmt: skip
+                          "1", "--w-diversity", "1", "--w-free-skate", "1", "--warm", "4",
+                          "--cond-ramp", "1"])  # fmt: skip
     judge = TG.fit_judge(WindowSampler(seqs, stats, 24, 0.0, 1), WindowSampler(seqs, stats, 24, 0.0, 2),
-                         losses, skip=args.warm - 1)  # fmt: skip
+                         losses, skip=args.warm - 1, batches=2, steps=20)  # fmt: skip
     model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32, film=True))
     weights = {k: getattr(args, f"w_{k}") for k in TD.WEIGHTS}
     batch = WindowSampler(seqs, stats, 24, 0.0, 3).batch(6)
@@ -117,6 +153,8 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     assert all(torch.isfinite(v) for v in parts.values())
     assert float(parts["judge"].detach()) > 0
     assert float(parts["feat"]) == 0.0  # every window swapped: nothing to reconstruct
+    for name in ("prior", "diversity", "free_skate"):
+        assert torch.isfinite(parts[name]) and float(parts[name].detach()) >= 0.0
     parts["total"].backward()
     assert model.film2.weight.grad.abs().sum() > 0  # the asked genre reaches the output
     val = TD.validate(model, losses, [batch], judge)
