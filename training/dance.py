@@ -68,6 +68,7 @@ WEIGHTS = {
     "genre": 0.1,
     "judge": 0.0,
     "prior": 0.0,
+    "match": 0.0,
     "diversity": 0.0,
     "free_skate": 0.0,
 }
@@ -306,14 +307,15 @@ def train_step(
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
-    for k in ("judge", "prior", "diversity", "free_skate"):
+    for k in ("judge", "prior", "match", "diversity", "free_skate"):
         parts[k] = torch.zeros(())
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
-        parts["judge"] = nn.functional.cross_entropy(judge(frames), asked[music])
+        parts["judge"] = judge.judged(judge(frames), asked[music])
         free = swapped[music]
         if free.any():
             parts["prior"] = judge.prior(kinetic[free], asked[swapped])
+            parts["match"] = judge.match(kinetic[free], asked[swapped])
             parts["diversity"] = judge.diversity(kinetic[free], asked[swapped])
             skate = TG.free_skating(pos[free], raw[free], losses.feet)
             parts["free_skate"] = judge.skating(skate, asked[swapped])
@@ -398,7 +400,7 @@ def train(args: argparse.Namespace) -> None:
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
     judge = None
-    if any(weights[k] > 0 for k in ("judge", "prior", "diversity", "free_skate")):
+    if any(weights[k] > 0 for k in ("judge", "prior", "match", "diversity", "free_skate")):
         judge = TG.fit_judge(
             WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
             WindowSampler(val_seqs, stats, args.window, 0.0, 4321),

@@ -10,14 +10,15 @@ free after their warm-up frames and have no ground truth; they are scored by
 - a **judge**: a small convolutional network over time (dilated 1-D convolutions, mean
   pooling) of the per-frame root-local joint positions, joint velocities and root motion,
   fitted on windows of the real training dances and frozen; cross-entropy towards the asked
-  genre. ``training.eval_dance`` names genres with a linear model of window statistics (mean
+  genre, beyond a margin (a window named the asked genre with 80 % is left alone). ``training.eval_dance`` names genres with a linear model of window statistics (mean
   and deviation of positions and speeds): a judge of another family on other inputs, so
   that the evaluation stays evidence rather than the judge's own features learnt;
 - a **kinetic prior**: the window's AIST++-style kinetic statistics (per joint, log mean
   squared horizontal and vertical speed and log mean acceleration), each standardised by
   the asked genre's real windows, must stay within ``PRIOR_BAND`` deviations of that
   genre's mean (squared excess), so the judge is not satisfied by motion no dancer of the
-  genre makes;
+  genre makes, and each asked genre's mean of them over the batch must match the genre's
+  real mean (``--w-match``: without it the fine-tuned dances moved half as much as real);
 - a **diversity guard**: the swapped windows asked the same genre (different songs) must
   stay at least ``DIVERSITY_FLOOR`` of the real windows' mean pairwise distance apart in
   those kinetic statistics, so the genre is not learnt as one pattern for every song;
@@ -38,6 +39,7 @@ from torch import nn
 from motion import dance_features as DF
 
 PRIOR_BAND = 2.0
+JUDGE_MARGIN = 0.22  # cross-entropy at which the judge stops pushing: -log(0.8)
 DIVERSITY_FLOOR = 0.75
 JUDGE_STEPS = 600
 JUDGE_BATCH = 128
@@ -127,6 +129,20 @@ class ConvJudge(nn.Module):
         """Mean excess of each window's free skating ``skate (B,)`` over the asked ``genre
         (B,)``'s real windows' mean."""
         return torch.relu(skate - self.genre_skate[genre]).mean()
+
+    def judged(self, logits: torch.Tensor, genre: torch.Tensor) -> torch.Tensor:
+        """Cross-entropy towards the asked ``genre (B,)`` beyond ``JUDGE_MARGIN`` per window:
+        a window the judge already names so is left alone instead of made ever more so."""
+        ce = nn.functional.cross_entropy(logits, genre, reduction="none")
+        return torch.relu(ce - JUDGE_MARGIN).mean()
+
+    def match(self, kinetic: torch.Tensor, genre: torch.Tensor) -> torch.Tensor:
+        """Mean squared gap between each asked genre's mean standardised kinetic statistics
+        (over the windows asked it) and its real windows' mean: the band of :meth:`prior`
+        lets every joint move half as much as the genre's dancers, this does not."""
+        z = self.kinetic_z(kinetic)
+        gaps = [((z[genre == g].mean(0) - self.genre_mean[g]) ** 2).mean() for g in genre.unique()]
+        return torch.stack(gaps).mean()
 
     def diversity(self, kinetic: torch.Tensor, genre: torch.Tensor) -> torch.Tensor:
         """Squared shortfall of each asked genre's mean pairwise distance (standardised

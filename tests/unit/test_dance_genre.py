@@ -72,6 +72,13 @@ def test_judge_separates_genres_by_their_motion_and_bounds_each_genre():
     z = centres[genre[:8]]
     assert float(judge.prior(z, genre[:8])) == 0.0
     assert float(judge.prior(z + 10.0 * judge.kin_std, genre[:8])) > 1.0
+    # the genre's own windows match its mean; windows that all move less do not
+    assert float(judge.match(kinetic[genre == 1], genre[genre == 1])) < 0.05
+    assert float(judge.match(kinetic[genre == 1] - 2.0 * judge.kin_std, genre[genre == 1])) > 1.0
+    # the judge stops pushing once it names the asked genre with 80 % or more
+    sure = torch.tensor([[4.0, 0.0, 0.0, 0.0]])
+    assert float(judge.judged(sure, torch.tensor([0]))) == 0.0
+    assert float(judge.judged(sure, torch.tensor([1]))) > 3.0
     spread = kinetic[genre == 2]
     assert float(judge.diversity(spread, genre[genre == 2])) == 0.0
     same = spread[:1].expand(6, -1) + 0.01 * torch.randn(6, 10, generator=gen)
@@ -142,7 +149,8 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     seqs = [Sequence(f"walk{g}", g, a, m, True, True) for g in range(len(DF.MUSIC_GENRES))]
     losses = Losses(stats)
     args = TD.parse_args(["--window", "24", "--swap-share", "1.0", "--w-judge", "1", "--w-prior",
-                          "1", "--w-diversity", "1", "--w-free-skate", "1", "--warm", "4",
+                          "1", "--w-match", "1", "--w-diversity", "1", "--w-free-skate", "1",
+                          "--warm", "4",
                           "--cond-ramp", "1"])  # fmt: skip
     judge = TG.fit_judge(WindowSampler(seqs, stats, 24, 0.0, 1), WindowSampler(seqs, stats, 24, 0.0, 2),
                          losses, skip=args.warm - 1, batches=2, steps=20)  # fmt: skip
@@ -153,7 +161,7 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     assert all(torch.isfinite(v) for v in parts.values())
     assert float(parts["judge"].detach()) > 0
     assert float(parts["feat"]) == 0.0  # every window swapped: nothing to reconstruct
-    for name in ("prior", "diversity", "free_skate"):
+    for name in ("prior", "match", "diversity", "free_skate"):
         assert torch.isfinite(parts[name]) and float(parts[name].detach()) >= 0.0
     parts["total"].backward()
     assert model.film2.weight.grad.abs().sum() > 0  # the asked genre reaches the output
