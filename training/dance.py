@@ -202,6 +202,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="the schedule stage this run is (recorded once its steps are done)")  # fmt: skip
     p.add_argument("--swap-share", type=float, default=0.0,
                    help="share of music windows asked another genre (judge and prior only)")  # fmt: skip
+    p.add_argument("--guard-all", action="store_true",
+                   help="kinetic match and diversity guard on every music window, not only "
+                   "the swapped ones")  # fmt: skip
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--window", type=int, default=96, help="frames per training window")
     p.add_argument("--gt-frames", type=int, default=5, help="ground-truth stretch length")
@@ -315,8 +318,9 @@ def train_step(
         free = swapped[music]
         if free.any():
             parts["prior"] = judge.prior(kinetic[free], asked[swapped])
-            parts["match"] = judge.match(kinetic[free], asked[swapped])
-            parts["diversity"] = judge.diversity(kinetic[free], asked[swapped])
+            guard = torch.ones_like(free) if args.guard_all else free
+            parts["match"] = judge.match(kinetic[guard], asked[music][guard])
+            parts["diversity"] = judge.diversity(kinetic[guard], asked[music][guard])
             skate = TG.free_skating(pos[free], raw[free], losses.feet)
             parts["free_skate"] = judge.skating(skate, asked[swapped])
     parts["total"] = sum(weights[k] * parts[k] for k in weights)

@@ -150,7 +150,7 @@ def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     losses = Losses(stats)
     args = TD.parse_args(["--window", "24", "--swap-share", "1.0", "--w-judge", "1", "--w-prior",
                           "1", "--w-match", "1", "--w-diversity", "1", "--w-free-skate", "1",
-                          "--warm", "4",
+                          "--guard-all", "--warm", "4",
                           "--cond-ramp", "1"])  # fmt: skip
     judge = TG.fit_judge(WindowSampler(seqs, stats, 24, 0.0, 1), WindowSampler(seqs, stats, 24, 0.0, 2),
                          losses, skip=args.warm - 1, batches=2, steps=20)  # fmt: skip
