@@ -39,6 +39,17 @@ def data_dir() -> Path:
     return DATA_DIR
 
 
+@pytest.fixture
+def one_torch_thread():
+    """Tiny networks: more threads only contend (the suite may share the cores)."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def recorded_evaluation(record, report: dict, tmp_path: Path) -> dict:
     """``record(report, models)`` run on a copy of the shipped models folder in ``tmp_path``;
     the ``metrics.evaluation`` it left in the report's model entry."""

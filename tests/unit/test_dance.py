@@ -94,15 +94,7 @@ def test_genres():
 # --------------------------------------------------------------------------- torch
 
 torch = pytest.importorskip("torch")
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Tiny networks: more threads only contend (the suite may share the cores)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _stats(walk):

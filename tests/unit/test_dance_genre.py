@@ -12,20 +12,13 @@ from motion import retarget
 from tests.rigs import load_fixture
 
 torch = pytest.importorskip("torch")
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
 def walk():
     m = load_fixture()
     return retarget.to_canonical(m, retarget.make_rig(m.skeleton, m))
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def test_swapped_windows_are_music_windows_asked_another_music_genre():
