@@ -42,6 +42,16 @@ def docker(*args: str, timeout: float = 120, check: bool = True) -> subprocess.C
     return result
 
 
+def image_bytes(image: str) -> int:
+    """``image``'s size as docker reports it."""
+    return int(docker("image", "inspect", "-f", "{{.Size}}", image).stdout.strip())
+
+
+def shell_output(image: str, script: str) -> str:
+    """What ``script`` prints in a throwaway container of ``image`` (its entrypoint aside)."""
+    return docker("run", "--rm", "--entrypoint", "sh", image, "-c", script).stdout.strip()
+
+
 def compose_command() -> list[str] | None:
     """``docker compose`` (v2) or Debian's ``docker-compose`` (1.29), whichever is here."""
     if (

@@ -25,8 +25,10 @@ from tests.image.containers import (
     counter,
     docker,
     gauge,
+    image_bytes,
     needs_image,
     serving,
+    shell_output,
     unique,
 )
 from tests.rigs import FIXTURE
@@ -86,16 +88,16 @@ def names(entries: list[dict]) -> list[str]:
 
 
 def test_the_image_is_small_and_holds_no_build_or_test_tools():
-    size = docker("image", "inspect", "-f", "{{.Size}}", IMAGE).stdout.strip()
-    assert int(size) <= MAX_IMAGE_BYTES, f"{IMAGE} is {int(size) / 1e6:.0f} MB"
-    found = docker(
-        "run", "--rm", "--entrypoint", "sh", IMAGE, "-c",
+    size = image_bytes(IMAGE)
+    assert size <= MAX_IMAGE_BYTES, f"{IMAGE} is {size / 1e6:.0f} MB"
+    found = shell_output(
+        IMAGE,
         "find /opt/venv -type d -name tests | head -3;"
         " python -c 'import pip' 2>/dev/null && echo pip;"
         " python -c 'import setuptools' 2>/dev/null && echo setuptools;"
         " python -c 'import torch' 2>/dev/null && echo torch; true",
-    ).stdout  # fmt: skip
-    assert found.strip() == "", found
+    )
+    assert found == "", found
 
 
 # --- the container --------------------------------------------------------------------------------

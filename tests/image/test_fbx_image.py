@@ -8,7 +8,16 @@ import httpx
 import pytest
 
 from tests.fbx_files import blender_reads, make_fbx_files, require_bpy
-from tests.image.containers import FBX_IMAGE, REASON, UID, docker, serving, unique
+from tests.image.containers import (
+    FBX_IMAGE,
+    REASON,
+    UID,
+    docker,
+    image_bytes,
+    serving,
+    shell_output,
+    unique,
+)
 from tests.rigs import FIXTURE
 
 MAX_IMAGE_BYTES = 1.7e9  # docker's "MB": the slim image's 0.62 GB and Blender's 0.94 GB
@@ -34,15 +43,15 @@ def container():
 
 
 def test_the_fbx_image_holds_blender_and_no_build_or_test_tools():
-    size = docker("image", "inspect", "-f", "{{.Size}}", FBX_IMAGE).stdout.strip()
-    assert int(size) <= MAX_IMAGE_BYTES, f"{FBX_IMAGE} is {int(size) / 1e6:.0f} MB"
-    found = docker(
-        "run", "--rm", "--entrypoint", "sh", FBX_IMAGE, "-c",
+    size = image_bytes(FBX_IMAGE)
+    assert size <= MAX_IMAGE_BYTES, f"{FBX_IMAGE} is {size / 1e6:.0f} MB"
+    found = shell_output(
+        FBX_IMAGE,
         "python -c 'import bpy' || echo no-bpy;"
         " python -c 'import pip' 2>/dev/null && echo pip;"
         " python -c 'import torch' 2>/dev/null && echo torch; true",
-    ).stdout  # fmt: skip
-    assert found.strip() == "", found
+    )
+    assert found == "", found
 
 
 def test_a_read_only_fbx_container_transfers_an_fbx_character(container, tmp_path):
