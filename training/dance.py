@@ -26,8 +26,7 @@ leg lengths), Laban effort (angular-velocity energy per window, log ratio), foot
 under ground-truth contacts, genre cross-entropy. Whole songs are held out by take. With
 ``--swap-share`` some music windows are asked another genre and judged by a convolutional
 classifier of real dances, a per-genre kinetic prior, a diversity guard and a skating loss
-on their stillest foot instead; ``--w-song-diversity`` also runs long windows free in their
-own genre and keeps their 2-s pieces apart (``training.dance_genre``: why and how).
+on their stillest foot instead (``training.dance_genre``: why and how).
 
 Writes ``checkpoints/dance.pt`` (weights, step, config and the feature statistics: what an
 export needs) and the optimiser beside it in ``dance.pt.state`` (for ``--resume``, never
@@ -72,10 +71,7 @@ WEIGHTS = {
     "match": 0.0,
     "diversity": 0.0,
     "free_skate": 0.0,
-    "song_diversity": 0.0,
 }
-GUARDS = ("judge", "prior", "match", "diversity", "free_skate", "song_diversity")
-"""The terms that need the judge of real dances (``training.dance_genre``)."""
 SCHEDULE = Path(__file__).with_name("dance_schedule.json")
 
 
@@ -209,14 +205,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--guard-all", action="store_true",
                    help="kinetic match and diversity guard on every music window, not only "
                    "the swapped ones")  # fmt: skip
-    p.add_argument(
-        "--song-frames",
-        type=int,
-        default=308,
-        help="frames of the song guard's free-running windows (--w-song-diversity)",
-    )
-    p.add_argument("--song-batch", type=int, default=4, help="song guard windows per use")
-    p.add_argument("--song-every", type=int, default=4, help="steps between song guard uses")
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--window", type=int, default=96, help="frames per training window")
     p.add_argument("--gt-frames", type=int, default=5, help="ground-truth stretch length")
@@ -295,7 +283,7 @@ def init_from(path: Path, config: Config) -> tuple[DanceNet, DF.DanceStats, dict
 
 
 def train_step(
-    model, losses, batch, args, rng, step, weights, judge=None, song=None
+    model, losses, batch, args, rng, step, weights, judge=None
 ) -> dict[str, torch.Tensor]:
     audio, motion, genre, music = batch
     code, logits = model.encode_audio(audio)
@@ -322,7 +310,7 @@ def train_step(
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
-    for k in GUARDS:
+    for k in ("judge", "prior", "match", "diversity", "free_skate"):
         parts[k] = torch.zeros(())
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
@@ -335,22 +323,8 @@ def train_step(
             parts["diversity"] = judge.diversity(kinetic[guard], asked[music][guard])
             skate = TG.free_skating(pos[free], raw[free], losses.feet)
             parts["free_skate"] = judge.skating(skate, asked[swapped])
-    if judge is not None and song is not None:
-        parts["song_diversity"] = song_diversity(model, losses, song, args, judge)
     parts["total"] = sum(weights[k] * parts[k] for k in weights)
     return parts
-
-
-def song_diversity(model, losses, song, args, judge) -> torch.Tensor:
-    """The song guard: long music windows ``song`` (a sampler batch) run free in their own
-    genre after the warm-up, judged by how far apart their 2-s pieces stay."""
-    audio, motion, genre, music = (x[song[3]] for x in song)
-    if not len(genre):
-        return torch.zeros(())
-    code, _ = model.encode_audio(audio)
-    onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
-    pred = model.rollout(code, onehot, motion, None, warm=args.warm)
-    return judge.song_diversity(TG.piece_kinetics(losses, pred[:, args.warm - 1 :]), genre)
 
 
 @torch.no_grad()
@@ -429,19 +403,14 @@ def train(args: argparse.Namespace) -> None:
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
-    judge = song_sampler = None
-    if any(weights[k] > 0 for k in GUARDS):
+    judge = None
+    if any(weights[k] > 0 for k in ("judge", "prior", "match", "diversity", "free_skate")):
         judge = TG.fit_judge(
             WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
             WindowSampler(val_seqs, stats, args.window, 0.0, 4321),
             losses,
             skip=args.warm - 1,
         )
-    if weights["song_diversity"] > 0:
-        real = WindowSampler(train_seqs, stats, args.song_frames, 0.0, args.seed + 98)
-        judge.fit_song_spread(*TG.real_song_kinetics(real, losses, 8, 16, skip=args.warm - 1))
-        print(f"song guard: real spread between pieces {judge.genre_song_spread.tolist()}")
-        song_sampler = WindowSampler(train_seqs, stats, args.song_frames, 0.0, args.seed + step + 7)
     tb = None
     try:
         from torch.utils.tensorboard import SummaryWriter
@@ -460,10 +429,7 @@ def train(args: argparse.Namespace) -> None:
         for group in optimiser.param_groups:
             group["lr"] = lr
         batch = sampler.batch(args.batch)
-        song = None
-        if song_sampler is not None and step % args.song_every == 0:
-            song = song_sampler.batch(args.song_batch, beat_dropout=0.0)
-        parts = train_step(model, losses, batch, args, rng, step, weights, judge, song)
+        parts = train_step(model, losses, batch, args, rng, step, weights, judge)
         optimiser.zero_grad()
         parts["total"].backward()
         nn.utils.clip_grad_norm_(model.parameters(), 1.0)

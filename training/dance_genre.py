@@ -22,11 +22,6 @@ free after their warm-up frames and have no ground truth; they are scored by
 - a **diversity guard**: the swapped windows asked the same genre (different songs) must
   stay at least ``DIVERSITY_FLOOR`` of the real windows' mean pairwise distance apart in
   those kinetic statistics, so the genre is not learnt as one pattern for every song;
-- a **song guard** (``--w-song-diversity``): a few music windows of several seconds each
-  run free in their own genre, are cut into 2-s pieces, and the pieces of one window must
-  stay at least ``DIVERSITY_FLOOR`` of the real dances' mean distance between the pieces of
-  one window apart in those kinetic statistics: the guard above, on 2-s windows, never saw
-  the whole songs in which fine-tuned dances repeated one pattern;
 - **free skating**: with no ground-truth contacts, at every frame the stillest of the four
   foot points (heel and toe of each foot) is taken as standing, as ``motion.dance_feet``
   takes the slower foot; a window whose mean squared floor speed of it exceeds the asked
@@ -50,7 +45,6 @@ JUDGE_STEPS = 600
 JUDGE_BATCH = 128
 JUDGE_WIDTH = 48
 KINETIC_EPS = 1e-3
-SONG_PIECE = 60  # frames: the 2-s pieces a song guard's window is cut into
 
 
 def frame_inputs(pos: torch.Tensor, raw: torch.Tensor) -> torch.Tensor:
@@ -106,7 +100,6 @@ class ConvJudge(nn.Module):
         self.register_buffer("genre_std", torch.ones(genres, kinetic))
         self.register_buffer("genre_spread", torch.ones(genres))
         self.register_buffer("genre_skate", torch.zeros(genres))
-        self.register_buffer("genre_song_spread", torch.ones(genres))
         self.body = nn.Sequential(
             nn.Conv1d(channels, width, 5, padding=2),
             nn.ReLU(),
@@ -166,21 +159,6 @@ class ConvJudge(nn.Module):
             out.append((torch.relu(floor - d) / floor) ** 2)
         return torch.stack(out).mean() if out else torch.zeros(())
 
-    def song_diversity(self, kinetic: torch.Tensor, genre: torch.Tensor) -> torch.Tensor:
-        """Squared relative shortfall of each window's mean pairwise distance between its
-        pieces (``kinetic (B, P, K)``, standardised) below ``DIVERSITY_FLOOR`` of its
-        ``genre (B,)``'s real windows' (:meth:`fit_song_spread`), averaged over windows."""
-        floor = DIVERSITY_FLOOR * self.genre_song_spread[genre]
-        return ((torch.relu(floor - piece_spread(self.kinetic_z(kinetic))) / floor) ** 2).mean()
-
-    def fit_song_spread(self, kinetic: torch.Tensor, genre: torch.Tensor) -> None:
-        """Each music genre's mean distance between the pieces of one real window, of
-        ``kinetic (N, P, K)`` and ``genre (N,)`` (after :meth:`fit`)."""
-        spread = piece_spread(self.kinetic_z(kinetic))
-        for g in range(len(DF.MUSIC_GENRES)):
-            if (genre == g).any():
-                self.genre_song_spread[g] = spread[genre == g].mean().clamp_min(1e-3)
-
     def fit(
         self,
         frames: torch.Tensor,
@@ -236,36 +214,6 @@ def window_inputs(losses, z: torch.Tensor) -> tuple[torch.Tensor, ...]:
     raw = losses.raw(z)
     pos = losses.kinematics(raw)[1]
     return frame_inputs(pos, raw), kinetic_statistics(pos, raw), pos, raw
-
-
-def piece_spread(z: torch.Tensor) -> torch.Tensor:
-    """``(B,)`` mean pairwise distance between the ``P`` rows of each ``z (B, P, K)``."""
-    i, j = torch.triu_indices(z.shape[1], z.shape[1], 1)
-    return (z[:, i] - z[:, j]).norm(dim=-1).mean(1)
-
-
-def piece_kinetics(losses, z: torch.Tensor, piece: int = SONG_PIECE) -> torch.Tensor:
-    """``(B, P, K)`` kinetic statistics of consecutive ``piece``-frame pieces of standardised
-    poses ``z (B, T, M)`` (the frames after the last whole piece are left out)."""
-    raw = losses.raw(z)
-    pos = losses.kinematics(raw)[1]
-    b, p = z.shape[0], z.shape[1] // piece
-    cut = p * piece
-    pos = pos[:, :cut].reshape(b * p, piece, *pos.shape[2:])
-    raw = raw[:, :cut].reshape(b * p, piece, raw.shape[-1])
-    return kinetic_statistics(pos, raw).reshape(b, p, -1)
-
-
-def real_song_kinetics(sampler, losses, batches: int, size: int, skip: int):
-    """Piece kinetics ``(N, P, K)`` and genres ``(N,)`` of real music windows drawn by
-    ``sampler``, their first ``skip + 1`` frames left out as the rollouts' warm-up is."""
-    kinetic, genres = [], []
-    with torch.no_grad():
-        for _ in range(batches):
-            _, motion, genre, music = sampler.batch(size, beat_dropout=0.0)
-            kinetic.append(piece_kinetics(losses, motion[music][:, skip + 1 :]))
-            genres.append(genre[music])
-    return torch.cat(kinetic), torch.cat(genres)
 
 
 def real_windows(sampler, losses, batches: int, size: int, skip: int):
