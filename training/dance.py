@@ -72,6 +72,8 @@ WEIGHTS = {
     "diversity": 0.0,
     "free_skate": 0.0,
 }
+GUARDS = ("judge", "prior", "match", "diversity", "free_skate")
+"""The loss terms that need the judge of real dances (``training.dance_genre``)."""
 SCHEDULE = Path(__file__).with_name("dance_schedule.json")
 
 
@@ -310,7 +312,7 @@ def train_step(
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
-    for k in ("judge", "prior", "match", "diversity", "free_skate"):
+    for k in GUARDS:
         parts[k] = torch.zeros(())
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
@@ -404,7 +406,7 @@ def train(args: argparse.Namespace) -> None:
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
     judge = None
-    if any(weights[k] > 0 for k in ("judge", "prior", "match", "diversity", "free_skate")):
+    if any(weights[k] > 0 for k in GUARDS):
         judge = TG.fit_judge(
             WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
             WindowSampler(val_seqs, stats, args.window, 0.0, 4321),
