@@ -261,8 +261,8 @@ def warp_to_beats(
     Music beat times are seconds from the motion's frame 0. The output has the same frame
     count and rate; output frame ``i`` shows the source pose at ``s(i / fps)``, ``s`` a
     monotone map composed of ``iterations`` passes, each a cubic (PCHIP, so the playback
-    rate changes smoothly) through the anchors of :func:`match_beats`, continued with slope
-    1 before the first and after the last. A warp moves the speed minima a little, so each
+    rate changes smoothly) through the anchors of :func:`match_beats` and the clip's ends
+    (:func:`_pinned_knots`). A warp moves the speed minima a little, so each
     pass finds the kinematic beats afresh (the first time ``kin_beats`` when given) on the
     speed of the motion warped so far, ``v(s(t)) s'(t)``: the source's joint speed through
     the map, so the motion itself is resampled once. ``anchors`` are those of the first
@@ -290,13 +290,24 @@ def warp_to_beats(
         first = anchors if first is None else first
         if len(anchors) < 2:
             break
-        knots_out = np.concatenate([[anchors[0, 0] - 1e3], anchors[:, 0], [anchors[-1, 0] + 1e3]])
-        knots_src = np.concatenate([[anchors[0, 1] - 1e3], anchors[:, 1], [anchors[-1, 1] + 1e3]])
+        knots_out, knots_src = _pinned_knots(anchors, out_t[-1])
         step = PchipInterpolator(knots_out, knots_src)(out_t)
         src_t = _through(src_t, out_t, step)
         moved = True
     warped = K.resample_at(motion, src_t * fps, fps) if moved else motion
     return WarpResult(warped, first if first is not None else np.zeros((0, 2)))
+
+
+def _pinned_knots(anchors: np.ndarray, end: float) -> tuple[np.ndarray, np.ndarray]:
+    """A pass's knots: its ``anchors (A, 2)`` (output, source seconds) and the clip's ends,
+    0 and ``end``, each mapped onto itself, so the map neither starts before the first
+    frame nor runs past the last one. Continued with slope 1 instead, a pass that ended
+    its anchors at a fast rate ran the source out seconds early and froze the dance's end.
+    An anchor on an end stands for the pinned knot."""
+    out, src = anchors[:, 0], anchors[:, 1]
+    keep = (out > 0.0) & (out < end) & (src > 0.0) & (src < end)
+    return (np.concatenate([[0.0], out[keep], [end]]),
+            np.concatenate([[0.0], src[keep], [end]]))  # fmt: skip
 
 
 def _through(mapped: np.ndarray, times: np.ndarray, query: np.ndarray) -> np.ndarray:

@@ -98,6 +98,23 @@ def test_warp_moves_kinematic_beats_onto_the_music():
     assert len(far.anchors) == 0 and far.motion is motion
 
 
+def test_a_warp_that_ends_fast_does_not_freeze_the_end():
+    """The music's beats stop 6 s before the song does, after the dance has been sped up
+    onto its last few: the rest of the dance still plays to the end, none of it held."""
+    from motion import kinematics as K
+
+    music = np.arange(0.5, 14.0, 0.5)
+    late = np.clip(np.arange(len(music)) - (len(music) - 5), 0, None) * 0.05
+    kin = np.concatenate([music + late, 14.0 + late[-1] + np.arange(0.5, 6.0, 0.5)])
+    motion = _canonical_bounce(kin, 20.0, shift=0.0)
+    result = BW.warp_to_beats(motion, music)
+    assert len(result.anchors) > 20
+    speed = BW.joint_speed(K.global_positions(result.motion), FPS)
+    source = BW.joint_speed(K.global_positions(motion), FPS)
+    last = int(FPS)  # the last second, a bounce and more
+    assert speed[-last:].mean() > 0.5 * source[-last:].mean()
+
+
 def test_match_beats_limits_the_playback_rate():
     music = np.arange(0.0, 5.0, 0.5)
     kin = music + np.array([0, 0.15, -0.15, 0.15, -0.15, 0, 0, 0, 0, 0])
