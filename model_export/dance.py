@@ -13,7 +13,7 @@ Two graphs, both with a symbolic batch axis:
 Writes ``models/dance/{audio,step}.onnx`` and ``models/dance/stats.npz`` (feature statistics
 and the seeded start poses) and the manifest entry ``dance-dwm``. Parity with torch is
 checked before listing: the audio graph at several shapes, the step graph over
-``PARITY_STEPS`` autoregressive steps (its own outputs fed back, as the service runs it).
+``PARITY_STEPS`` autoregressive steps, each fed torch's pose and states of the step before.
 """
 
 from __future__ import annotations
@@ -132,8 +132,10 @@ def graph_specs(model: TD.DanceNet) -> dict:
 
 def parity(model: TD.DanceNet, out: Path, seed: int = 0, steps: int = PARITY_STEPS) -> dict:
     """Largest absolute differences torch vs onnxruntime: the audio graph at
-    :data:`AUDIO_SHAPES`, the step graph over ``steps`` autoregressive steps (batch 2).
-    Raises ``RuntimeError`` outside ``rtol``/``atol``."""
+    :data:`AUDIO_SHAPES`, the step graph over ``steps`` autoregressive steps (batch 2), both
+    fed torch's pose and states of the step before: a free-running loop amplifies the two
+    runtimes' rounding (as it does the thread count's), and one network failed at step 76
+    on a last-bit difference. Raises ``RuntimeError`` outside ``rtol``/``atol``."""
     import onnxruntime as ort
 
     model.eval()
@@ -154,18 +156,16 @@ def parity(model: TD.DanceNet, out: Path, seed: int = 0, steps: int = PARITY_STE
     batch = 2
     code = torch.randn(batch, steps, model.config.code, generator=gen).relu()
     genre = torch.softmax(torch.randn(batch, len(DF.GENRES), generator=gen), -1)
-    prev_t = prev_o = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
+    prev_t = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
     state_t = model.init_state(batch)
-    state_o = [s.numpy() for s in state_t]
-    prev_o = prev_o.numpy()
     worst_step = 0.0
     for t in range(steps):
+        feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_t.numpy()}
+        feeds.update({n: s.numpy() for n, s in zip(STATE_NAMES, state_t, strict=True)})
+        got = step.run(None, feeds)
         with torch.no_grad():
             prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
-        feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_o}
-        feeds.update(dict(zip(STATE_NAMES, state_o, strict=True)))
-        prev_o, *state_o = step.run(None, feeds)
-        for g, w in zip([prev_o, *state_o], [prev_t, *state_t], strict=True):
+        for g, w in zip(got, [prev_t, *state_t], strict=True):
             w = w.numpy()
             if not np.allclose(g, w, rtol=RTOL, atol=ATOL):
                 raise RuntimeError(f"step.onnx: parity fails at step {t}")
