@@ -128,9 +128,9 @@ show-styles: $(VENV)/.dev
 	$(PY) -m training.show_styles
 
 # Dance (jacob2019 made to work): the alignment study writes training/dance_alignment.json;
-# train-dance replays training/dance_schedule.json into checkpoints/dance.pt from the stage the
-# checkpoint has not finished (TensorBoard in runs/dance/); DANCE_ARGS="--from-scratch"
-# retrains every stage. eval-dance: the generated beat test
+# train-dance replays training/dance_schedule.json into checkpoints/dance.pt (each stage's
+# checkpoint in checkpoints/dance-stages/, TensorBoard in runs/dance/), skipping the stages
+# already finished; DANCE_ARGS="--from-scratch" retrains every stage. eval-dance: the generated beat test
 # set (tracker F-measure, alignment to known beats vs shifted grids), every shared song, the
 # held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
 # contact score, AIST++ feature distances to real dance (development and test halves).

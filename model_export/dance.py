@@ -233,7 +233,9 @@ def main(argv: list[str] | None = None) -> dict:
         stats,
         ckpt["start_poses"],
         args.models_dir,
-        metrics={"steps": int(ckpt["step"]), "best_val": ckpt.get("best_val")},
+        metrics={"steps": int(ckpt["step"]), "best_val": ckpt.get("best_val"),
+                 "stages": ckpt.get("stages", []),
+                 **({"stage_steps": ckpt["stage_steps"]} if "stage_steps" in ckpt else {})},
         extra={
             "alignment": {
                 "global_rate": summary["global_rate"],

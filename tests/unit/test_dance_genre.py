@@ -168,12 +168,80 @@ def test_schedule_stages_are_training_flags():
     from training import dance_schedule as DS
 
     stages = DS.load_schedule()
-    assert [s["name"] for s in stages][0] == "base"
-    for stage in stages:
+    names = [s["name"] for s in stages]
+    assert names[0] == "base"
+    for i, stage in enumerate(stages):
+        if "blend" in stage:  # blends stages before it
+            spec = stage["blend"]
+            assert {spec["from"], *spec["tuned"]} <= set(names[:i]) and 0 < spec["weight"] <= 1
+            continue
+        assert stage.get("from", names[max(i - 1, 0)]) in names[: max(i, 1)]
         args = TD.parse_args(DS.stage_argv(stage))
         for name, value in stage["flags"].items():
             assert getattr(args, name.replace("-", "_")) == value
     assert DS.stage_argv({"flags": {"film": True, "steps": 5}}) == ["--film", "--steps", "5"]
+
+
+def test_a_blend_moves_the_start_towards_the_mean_of_its_fine_tunings():
+    from training import dance as TD
+    from training import dance_schedule as DS
+
+    torch.manual_seed(0)
+    start = {"model": TD.DanceNet(TD.Config()).state_dict(), "stages": ["base"]}
+    tuned = [{"model": TD.DanceNet(TD.Config(film=True)).state_dict(), "stages": ["base", n],
+              "net_config": {"film": True}} for n in ("a", "b")]  # fmt: skip
+    out = DS.blend(start, tuned, 0.6)
+    mean = (tuned[0]["model"]["out.weight"] + tuned[1]["model"]["out.weight"]) / 2
+    want = 0.4 * start["model"]["out.weight"] + 0.6 * mean
+    torch.testing.assert_close(out["model"]["out.weight"], want)
+    film = (tuned[0]["model"]["film1.weight"] + tuned[1]["model"]["film1.weight"]) / 2
+    torch.testing.assert_close(out["model"]["film1.weight"], 0.6 * film)  # zero in the start
+    assert out["net_config"] == {"film": True} and set(out["model"]) == set(tuned[0]["model"])
+    TD.DanceNet(TD.Config(film=True)).load_state_dict(out["model"])
+
+
+def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path):
+    """A tiny schedule of the shipped one's shape (a base, two fine-tunings of it, their
+    blend) on the real dances: the checkpoint is the blend of the stage checkpoints, a second
+    replay trains nothing, and a lost stage is trained again alone."""
+    import json
+
+    from tests.conftest import data_path
+    from training import dance_schedule as DS
+
+    data_path("dance-with-melody")  # skips without the dance data
+    small = {"steps": 2, "batch": 2, "window": 32, "cond-ramp": 1, "val-every": 1000,
+             "save-every": 1000}  # fmt: skip
+    tuning = {**small, "film": True, "swap-share": 0.5, "w-judge": 0.2}
+    schedule = tmp_path / "schedule.json"
+    schedule.write_text(json.dumps({"stages": [
+        {"name": "base", "flags": {**small, "seed": 0}},
+        {"name": "genre-1", "from": "base", "flags": {**tuning, "seed": 1}},
+        {"name": "genre-2", "from": "base", "flags": {**tuning, "seed": 2}},
+        {"name": "blend", "blend": {"from": "base", "tuned": ["genre-1", "genre-2"],
+                                    "weight": 0.6}},
+    ]}))  # fmt: skip
+    work, out = tmp_path / "work", tmp_path / "dance.pt"
+    argv = ["--schedule", str(schedule), "--work", str(work), "--out", str(out)]
+    assert DS.main(argv) == 0
+    load = lambda p: torch.load(p, map_location="cpu", weights_only=False)  # noqa: E731
+    got, base = load(out), load(work / "base.pt")
+    tuned = [load(work / f"genre-{s}.pt") for s in (1, 2)]
+    assert got["stages"] == ["base", "genre-1", "genre-2", "blend"]
+    assert tuned[0]["train_config"]["init"] == str(work / "base.pt")
+    assert tuned[1]["train_config"]["init"] == str(work / "base.pt")
+    assert not torch.equal(tuned[0]["model"]["out.weight"], tuned[1]["model"]["out.weight"])
+    want = 0.4 * base["model"]["out.weight"] + 0.3 * sum(t["model"]["out.weight"] for t in tuned)
+    torch.testing.assert_close(got["model"]["out.weight"], want)
+    stamps = {p.name: p.stat().st_mtime_ns for p in work.glob("*.pt")}
+    assert DS.main(argv) == 0  # everything done: nothing trained
+    assert {p.name: p.stat().st_mtime_ns for p in work.glob("*.pt")} == stamps
+    (work / "genre-2.pt").unlink()
+    out.unlink()
+    assert DS.main(argv) == 0
+    assert (work / "base.pt").stat().st_mtime_ns == stamps["base.pt"]
+    assert (work / "genre-1.pt").stat().st_mtime_ns == stamps["genre-1.pt"]
+    assert load(out)["stages"] == ["base", "genre-1", "genre-2", "blend"]
 
 
 def test_a_stage_stops_at_its_stop_step_and_a_resumed_run_never_passes_it():
