@@ -187,10 +187,11 @@ def test_a_blend_moves_the_start_towards_the_mean_of_its_fine_tunings():
     from training import dance_schedule as DS
 
     torch.manual_seed(0)
-    start = {"model": TD.DanceNet(TD.Config()).state_dict(), "stages": ["base"]}
+    start = {"model": TD.DanceNet(TD.Config()).state_dict(), "stages": ["base"], "step": 80}
     tuned = [{"model": TD.DanceNet(TD.Config(film=True)).state_dict(), "stages": ["base", n],
-              "net_config": {"film": True}} for n in ("a", "b")]  # fmt: skip
+              "net_config": {"film": True}, "step": 10} for n in ("a", "b")]  # fmt: skip
     out = DS.blend(start, tuned, 0.6)
+    assert out["step"] == 100  # every stage's steps
     mean = (tuned[0]["model"]["out.weight"] + tuned[1]["model"]["out.weight"]) / 2
     want = 0.4 * start["model"]["out.weight"] + 0.6 * mean
     torch.testing.assert_close(out["model"]["out.weight"], want)
