@@ -233,16 +233,20 @@ def main(argv: list[str] | None = None) -> dict:
         stats,
         ckpt["start_poses"],
         args.models_dir,
-        metrics={"steps": int(ckpt["step"]), "best_val": ckpt.get("best_val"),
-                 "stages": ckpt.get("stages", []),
-                 **({"stage_steps": ckpt["stage_steps"]} if "stage_steps" in ckpt else {})},
+        metrics={
+            "steps": int(ckpt["step"]),
+            "best_val": ckpt.get("best_val"),
+            "stages": ckpt.get("stages", []),
+            **({"stage_steps": ckpt["stage_steps"]} if "stage_steps" in ckpt else {}),
+        },
         extra={
             "alignment": {
                 "global_rate": summary["global_rate"],
                 "verified": summary["verified"],
                 "rate_corrected": summary["rate_corrected"],
             },
-            "validation_takes": list(TD.VAL_TAKES),
+            "fold": TD.fold_of(ckpt),
+            "validation_takes": list(TD.held_out_takes(ckpt)),
         },
         trained_at=ckpt.get("saved_at"),
     )

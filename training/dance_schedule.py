@@ -1,6 +1,6 @@
 """Replay the shipped dance model's training schedule (``dance_schedule.json`` beside this file).
 
-    python -m training.dance_schedule [--out checkpoints/dance.pt] [--from-scratch]
+    python -m training.dance_schedule [--out checkpoints/dance.pt] [--from-scratch] [--fold K]
 
 A stage is either the flags of one ``python -m training.dance`` run (the others at their
 defaults), started (``--init``) from the weights, statistics and start poses of the stage
@@ -9,7 +9,8 @@ named by its ``from`` (by default the one before it), or a ``blend``: the weight
 Wortsman et al. 2022, over a model soup of fine-tunings from one start). Each stage ends
 in ``--work``/NAME.pt, so a replay continues an unfinished stage (``--resume``), skips the
 finished ones, and copies the last stage's checkpoint to ``--out``; it does nothing when
-``--out`` has every stage; ``--from-scratch`` runs every stage again.
+``--out`` has every stage; ``--from-scratch`` runs every stage again. ``--fold K`` trains
+every stage without fold K's songs (``training.dance.FOLDS``; the shipped model is fold 0's).
 """
 
 from __future__ import annotations
@@ -72,12 +73,15 @@ def run_blend(stage: dict, work: Path, names: list[str]) -> None:
     spec = stage["blend"]
     load = lambda name: torch.load(work / f"{name}.pt", map_location="cpu", weights_only=False)  # noqa: E731
     start, tuned = load(spec["from"]), [load(n) for n in spec["tuned"]]
+    folds = {TD.fold_of(c) for c in [start, *tuned]}
+    if len(folds) != 1:
+        raise SystemExit(f"stage {stage['name']} would blend folds {sorted(folds)}")
     out = blend(start, tuned, float(spec["weight"]))
     done = set(start.get("stages", [])) | {s for t in tuned for s in t.get("stages", [])}
     out["stages"] = [n for n in names if n in done] + [stage["name"]]
     out["stage_steps"] = {spec["from"]: int(start["step"]),
                           **{n: int(t["step"]) for n, t in zip(spec["tuned"], tuned, strict=True)}}  # fmt: skip
-    out["train_config"] = {"stage": stage["name"], **spec}
+    out["train_config"] = {"stage": stage["name"], **spec, "fold": folds.pop()}
     out["saved_at"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     tmp = work / f"{stage['name']}.tmp"
     torch.save(out, tmp)
@@ -91,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--schedule", type=Path, default=TD.SCHEDULE)
     parser.add_argument("--from-scratch", action="store_true")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--fold", type=int, default=0, choices=range(len(TD.FOLDS)))
     args = parser.parse_args(argv)
     stages = load_schedule(args.schedule)
     names = [s["name"] for s in stages]
@@ -108,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"stage {name}: blend {stage['blend']}", flush=True)
             run_blend(stage, args.work, names)
             continue
-        flags = ["--checkpoint", str(path), "--threads", str(args.threads), "--stage", name]
+        flags = ["--checkpoint", str(path), "--threads", str(args.threads), "--stage", name,
+                 "--fold", str(args.fold)]  # fmt: skip
         if current == name:
             flags.append("--resume")
         elif i > 0:

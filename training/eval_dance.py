@@ -22,8 +22,9 @@ a beat). Parts:
 - **shared songs** (every Dance with Melody song, whole, its own genre): beat alignment
   against the tracker's beats and against the beats at the song's danced (else librosa's)
   tempo (``training.dance_tempo``), beside shifted grids; stalls. On the four held-out songs
-  (``training.dance.VAL_TAKES``, the part the real dance covers) also the real dance's
-  alignment against the same tracker's beats, and the warp's share (no warp);
+  (the model's fold: its manifest entry's ``validation_takes``; the part the real dance
+  covers) also the real dance's alignment against the same tracker's beats, and the warp's
+  share (no warp);
 - **ten minutes**: the held-out songs' music looped to 10 minutes, one generation per seed:
   stalls, mean joint speed per 30 s;
 - **genre**: a classifier of dance motion (``training.judges.ClipClassifier`` on
@@ -202,9 +203,10 @@ def shared_songs(engine, log=print, names=None) -> dict:
     return rows
 
 
-def held_out_songs():
+def held_out_songs(takes=None):
     """``(name, genre, real motion on the song's clock, song samples it covers, sr)`` for
-    each held-out song, and ``(genre, real motion)`` of the training songs' dances."""
+    each held-out song (``takes``, default the shipped fold's), and ``(genre, real motion)``
+    of the training songs' dances."""
     from training import dance as TD
     from training import dance_alignment as DA
     from training.dance_data import retime
@@ -217,7 +219,7 @@ def held_out_songs():
         if alignment is None:
             continue
         motion = retime(clip.motion, alignment.rate)
-        if clip.name not in TD.VAL_TAKES:
+        if clip.name not in (TD.VAL_TAKES if takes is None else takes):
             train.append((clip.genre, motion))
             continue
         folder = data_dir() / Path(clip.extra["audio"]).parent
@@ -248,13 +250,13 @@ def genre_features(motion: Motion) -> np.ndarray:
     return window_features(floor_rooted(motion))
 
 
-def held_out(engine, seeds: int, log=print) -> dict:
+def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
     and the generated dances' to the beats at the song's danced tempo too), genre
     recognition of every requested genre, foot sliding and contacts, feature distances."""
     from training.judges import ClipClassifier
 
-    held, train = held_out_songs()
+    held, train = held_out_songs(takes)
     genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])
     from training import dance_alignment as DA
     from training.dance_tempo import reference_tempo
@@ -411,7 +413,7 @@ def evaluate(
     if not held_out_only:
         report["generated_set"] = generated_set(engine, 1, log, test_songs)
         report["shared_songs"] = shared_songs(engine, log, names=shared_names)
-    held = held_out(engine, seeds, log)
+    held = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
     report.update(held)
     if not held_out_only:

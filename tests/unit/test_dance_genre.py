@@ -203,11 +203,13 @@ def test_a_blend_moves_the_start_towards_the_mean_of_its_fine_tunings():
 
 def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path):
     """A tiny schedule of the shipped one's shape (a base, two fine-tunings of it, their
-    blend) on the real dances: the checkpoint is the blend of the stage checkpoints, a second
-    replay trains nothing, and a lost stage is trained again alone."""
+    blend) on the real dances, fold 1: the checkpoint is the blend of the stage checkpoints,
+    every stage is fold 1's and no fold-0 stage may start from them, a second replay trains
+    nothing, and a lost stage is trained again alone."""
     import json
 
     from tests.conftest import data_path
+    from training import dance as TD
     from training import dance_schedule as DS
 
     data_path("dance-with-melody")  # skips without the dance data
@@ -223,12 +225,15 @@ def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path):
                                     "weight": 0.6}},
     ]}))  # fmt: skip
     work, out = tmp_path / "work", tmp_path / "dance.pt"
-    argv = ["--schedule", str(schedule), "--work", str(work), "--out", str(out)]
+    argv = ["--schedule", str(schedule), "--work", str(work), "--out", str(out), "--fold", "1"]
     assert DS.main(argv) == 0
     load = lambda p: torch.load(p, map_location="cpu", weights_only=False)  # noqa: E731
     got, base = load(out), load(work / "base.pt")
     tuned = [load(work / f"genre-{s}.pt") for s in (1, 2)]
     assert got["stages"] == ["base", "genre-1", "genre-2", "blend"]
+    assert [TD.fold_of(c) for c in (base, *tuned, got)] == [1, 1, 1, 1]
+    with pytest.raises(SystemExit, match="fold 1's, not fold 0's"):  # it saw fold 0's songs
+        TD.main(["--init", str(work / "base.pt"), "--checkpoint", str(tmp_path / "x.pt")])
     assert tuned[0]["train_config"]["init"] == str(work / "base.pt")
     assert tuned[1]["train_config"]["init"] == str(work / "base.pt")
     assert not torch.equal(tuned[0]["model"]["out.weight"], tuned[1]["model"]["out.weight"])

@@ -56,3 +56,4 @@ def test_shipped_graphs_match_the_checkpoint(tmp_path):
     shipped = DF.DanceStats.load(MODELS / entry.extra["stats"])
     np.testing.assert_array_equal(shipped.motion_mean, stats.motion_mean)
     np.testing.assert_array_equal(shipped.audio_std, stats.audio_std)
+    assert entry.extra["validation_takes"] == list(TD.held_out_takes(ckpt))  # eval's songs
