@@ -45,11 +45,14 @@ def stage_argv(stage: dict) -> list[str]:
     return argv
 
 
-def stages_of(checkpoint: Path) -> tuple[list[str], str | None]:
-    """The stages ``checkpoint`` finished, and the stage it is part-way through (or None)."""
+def stages_of(checkpoint: Path, fold: int = 0) -> tuple[list[str], str | None]:
+    """The stages ``checkpoint`` finished, and the stage it is part-way through (or None);
+    ``SystemExit`` when it is another fold's than ``fold`` (it has seen that fold's songs)."""
     if not checkpoint.exists():
         return [], None
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    if TD.fold_of(ckpt) != fold:
+        raise SystemExit(f"{checkpoint} is fold {TD.fold_of(ckpt)}'s, not fold {fold}'s")
     done = list(ckpt.get("stages", []))
     current = ckpt.get("train_config", {}).get("stage")
     return done, (current if current and current not in done else None)
@@ -99,13 +102,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     stages = load_schedule(args.schedule)
     names = [s["name"] for s in stages]
-    if not args.from_scratch and stages_of(args.out)[0] == names:
+    if not args.from_scratch and stages_of(args.out, args.fold)[0] == names:
         print(f"{args.out}: every stage of the schedule done ({', '.join(names)})")
         return 0
     args.work.mkdir(parents=True, exist_ok=True)
     for i, stage in enumerate(stages):
         name, path = stage["name"], args.work / f"{stage['name']}.pt"
-        done, current = ([], None) if args.from_scratch else stages_of(path)
+        done, current = ([], None) if args.from_scratch else stages_of(path, args.fold)
         if name in done:
             print(f"stage {name}: done ({path})", flush=True)
             continue
@@ -121,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
             flags += ["--init", str(args.work / f"{stage.get('from', names[i - 1])}.pt")]
         print(f"stage {name}: {stage_argv(stage)}", flush=True)
         TD.main(flags + stage_argv(stage))
-        if name not in stages_of(path)[0]:
+        if name not in stages_of(path, args.fold)[0]:
             raise SystemExit(f"stage {name} stopped before its last step; run again")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(args.work / f"{names[-1]}.pt", args.out)

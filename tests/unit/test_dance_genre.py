@@ -234,6 +234,8 @@ def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path):
     assert [TD.fold_of(c) for c in (base, *tuned, got)] == [1, 1, 1, 1]
     with pytest.raises(SystemExit, match="fold 1's, not fold 0's"):  # it saw fold 0's songs
         TD.main(["--init", str(work / "base.pt"), "--checkpoint", str(tmp_path / "x.pt")])
+    with pytest.raises(SystemExit, match="fold 1's, not fold 0's"):  # nor a fold-0 replay
+        DS.main(argv[:-2])
     assert tuned[0]["train_config"]["init"] == str(work / "base.pt")
     assert tuned[1]["train_config"]["init"] == str(work / "base.pt")
     assert not torch.equal(tuned[0]["model"]["out.weight"], tuned[1]["model"]["out.weight"])
