@@ -92,6 +92,13 @@ def fold_of(ckpt: dict) -> int:
     return int(ckpt.get("train_config", {}).get("fold", 0))
 
 
+def require_fold(ckpt: dict, fold: int, path) -> None:
+    """``SystemExit`` unless checkpoint ``ckpt`` (read from ``path``) is fold ``fold``'s:
+    another fold's has seen this fold's songs."""
+    if fold_of(ckpt) != fold:
+        raise SystemExit(f"{path} is fold {fold_of(ckpt)}'s, not fold {fold}'s")
+
+
 def held_out_takes(ckpt: dict) -> tuple[str, ...]:
     """The songs a checkpoint never saw."""
     return FOLDS[fold_of(ckpt)]
@@ -398,15 +405,13 @@ def train(args: argparse.Namespace) -> None:
     weights = {k: getattr(args, f"w_{k}") for k in WEIGHTS}
     if args.resume and args.checkpoint.exists():
         model, stats, ckpt = load_checkpoint(args.checkpoint)
-        if fold_of(ckpt) != args.fold:
-            raise SystemExit(f"{args.checkpoint} is fold {fold_of(ckpt)}'s, not fold {args.fold}'s")
+        require_fold(ckpt, args.fold, args.checkpoint)
         model.train()
         poses, step, best = ckpt["start_poses"], int(ckpt["step"]), ckpt.get("best_val")
         stages = list(ckpt.get("stages", []))
     elif args.init is not None:
         model, stats, start = init_from(args.init, Config(film=args.film))
-        if fold_of(start) != args.fold:  # it has seen this fold's songs
-            raise SystemExit(f"{args.init} is fold {fold_of(start)}'s, not fold {args.fold}'s")
+        require_fold(start, args.fold, args.init)
         poses, stages, step, best, ckpt = (
             start["start_poses"],
             start.get("stages", []),

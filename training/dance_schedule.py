@@ -51,8 +51,7 @@ def stages_of(checkpoint: Path, fold: int = 0) -> tuple[list[str], str | None]:
     if not checkpoint.exists():
         return [], None
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    if TD.fold_of(ckpt) != fold:
-        raise SystemExit(f"{checkpoint} is fold {TD.fold_of(ckpt)}'s, not fold {fold}'s")
+    TD.require_fold(ckpt, fold, checkpoint)
     done = list(ckpt.get("stages", []))
     current = ckpt.get("train_config", {}).get("stage")
     return done, (current if current and current not in done else None)
