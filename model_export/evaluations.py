@@ -120,6 +120,7 @@ def record_dance(report: dict, models_dir: Path) -> None:
             "stalls": sum(r["stalls"] for r in shared.values()),
             "passing_reference_beats": sum(r["passes"] for r in shared.values()),
         },
+        **({"held_out_by_fold": fold_figures(report["folds"])} if "folds" in report else {}),
         "measured": report.get("measured", ""),
         "machine": report["machine"],
         "by": "python -m training.eval_dance (beat alignment: motion.beat_warp.alignment, AIST++ "
@@ -131,6 +132,24 @@ def record_dance(report: dict, models_dir: Path) -> None:
     put_evaluation(
         report["model_name"], report["model_version"], "held_out_songs", figures, models_dir
     )
+
+
+def fold_figures(folds: dict) -> dict:
+    """The summary of ``eval_dance``'s ``folds``: which model held out which songs, and the
+    test-half figures of every fold pooled."""
+    pooled = folds["pooled"]
+    return {
+        "folds": [{k: r[k] for k in ("fold", "model", "songs")} for r in folds["per_fold"]],
+        "genre_test_half": {k: v for k, v in pooled["genre"]["test"].items() if k != "confusion"},
+        "foot_sliding_cm_s": pooled["foot_sliding_cm_s"],
+        "foot_contact_score": pooled["foot_contact_score"],
+        "songs_on_the_beat": pooled["songs_on_the_beat"],
+        "feature_distance_ratios_test_half": {
+            genre: {kind: row[kind]["ratio"] for kind in ("kinetic", "geometric")}
+            for genre, row in pooled["feature_distances"]["test"].items()
+            if genre != "segment_seconds"
+        },
+    }
 
 
 def record_game_invariants(report: dict, models_dir: Path) -> None:

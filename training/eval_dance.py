@@ -1,6 +1,6 @@
 """Evaluation of the shipped dance model (jacob2019 made to work).
 
-    python -m training.eval_dance [--seeds 3] [--json PATH] [--quick]
+    python -m training.eval_dance [--seeds 3] [--json PATH] [--quick] [--fold-models DIR]
 
 (``python -m model_export.evaluations PATH`` then records the report in the model's
 manifest entry.)
@@ -37,7 +37,10 @@ a beat). Parts:
 - **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++
   kinetic and geometric feature distances of the dances generated for the held-out songs to their real dances,
   beside the real dances of the genre's other songs to the same, per genre, and diversity;
-  the first half of each held-out song is the development half, the second the test half.
+  the first half of each held-out song is the development half, the second the test half;
+- **by fold** (``--fold-models``: the same recipe trained with another fold's songs held out,
+  exported to its own model folder): each fold's model judged on its own held-out songs
+  (genre, feet, beat, distances), and every fold pooled.
 
 A stall (``motion.dance_features.stalls``): 5 seconds of music in which the mean joint
 speed stays below 30 % of the dance's median.
@@ -69,13 +72,15 @@ BLOCK = 30.0  # seconds per energy block
 PASS_SCORE, PASS_RATIO = 0.2, 1.5  # the issue's bar on every generated pattern and tempo
 
 
-def load_engine():
+def load_engine(models: Path | None = None):
+    """The dance engine of folder ``models`` (default the first model folder: the shipped
+    one) and its manifest entry."""
     from service.config import Settings
     from service.engines.dance import DanceEngine
     from service.manifest import load_manifest
 
     settings = Settings(max_audio_seconds=TEN_MINUTES + 60)
-    models = settings.models_dir[0]  # the first model folder: the shipped one by default
+    models = settings.models_dir[0] if models is None else models
     entry = next(m for m in load_manifest(models).models if m.family == "dance")
     engine = DanceEngine(entry, models, settings)
     engine.load()
@@ -350,7 +355,66 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
         },
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
+        "_pooling": {"generated": generated_dances, "sliding": sliding, "contact": contact},
     }
+
+
+def song_passes(song: dict) -> bool:
+    """Every dance generated for a held-out song in its genre is on the tracker's beats."""
+    return all(d["bas"] >= PASS_SCORE and d["bas"] >= PASS_RATIO * d["chance"]
+               for d in song["generated"])  # fmt: skip
+
+
+def _summed(confusions: list[dict]) -> dict:
+    return {g: {n: sum(c[g][n] for c in confusions) for n in confusions[0][g]}
+            for g in confusions[0]}  # fmt: skip
+
+
+def require_disjoint_folds(entries: list) -> list[list[str]]:
+    """Each manifest entry's held-out songs; ``SystemExit`` where two entries share one
+    (pooling would count it twice, and one model would have been trained on it)."""
+    takes = [list(entry.extra.get("validation_takes") or []) for entry in entries]
+    every = [t for ts in takes for t in ts]
+    if len(set(every)) != len(every):
+        raise SystemExit(f"folds share held-out songs: {takes}; each fold must hold out others")
+    return takes
+
+
+def by_fold(folds: list[tuple]) -> dict:
+    """Every fold's held-out figures and all folds pooled. ``folds``: ``(manifest entry,
+    pooling data, held_out report)`` per model of one recipe, each with other songs held
+    out. Pooled: genre counts summed, feet over every dance, feature distances of the union
+    of the held-out songs with the real dances of the songs no fold held out as real vs
+    real."""
+    takes = require_disjoint_folds([entry for entry, _, _ in folds])
+    every = [t for ts in takes for t in ts]
+    rows = []
+    for i, ((entry, _, part), songs) in enumerate(zip(folds, takes, strict=True)):
+        rows.append({
+            "fold": entry.extra.get("fold", i),  # entries exported before folds: fold 0
+            "model": f"{entry.name} {entry.version}",
+            "songs": songs,
+            "genre": part["genre_accuracy"]["by_half"],
+            "foot_sliding_cm_s": part["foot_sliding_cm_s"],
+            "foot_contact_score": part["foot_contact_score"],
+            "songs_on_the_beat": sum(song_passes(s) for s in part["songs"].values()),
+            "feature_distances": part["feature_distances"],
+        })  # fmt: skip
+    held, rest = held_out_songs(every)
+    generated = {n: d for _, pooling, _ in folds for n, d in pooling["generated"].items()}
+    feet = {m: {k: round(float(np.mean([x for _, p, _ in folds for x in p[m][k]])), 3)
+                for k in ("real", "generated")} for m in ("sliding", "contact")}  # fmt: skip
+    halves = DM.HALVES
+    pooled = {
+        "songs": every,
+        "genre": {h: genre_accuracy(_summed([p["genre_accuracy"]["by_half"][h]["confusion"]
+                                             for _, _, p in folds])) for h in halves},
+        "foot_sliding_cm_s": feet["sliding"],
+        "foot_contact_score": feet["contact"],
+        "songs_on_the_beat": sum(r["songs_on_the_beat"] for r in rows),
+        "feature_distances": DM.feature_distances(held, rest, generated),
+    }  # fmt: skip
+    return {"per_fold": rows, "pooled": pooled}
 
 
 def genre_accuracy(confusion: dict[str, dict[str, int]]) -> dict:
@@ -397,10 +461,14 @@ def evaluate(
     test_songs=None,
     shared_names: list[str] | None = None,
     held_out_only: bool = False,
+    fold_models: list[Path] = (),
 ) -> dict:
     """All parts: ``test_songs`` (default the whole beat test set) and ``shared_names``
     (default every shared song) narrow the first two; ``held_out_only`` runs only the
-    held-out songs' part (genre, feet, distances: what compares two models)."""
+    held-out songs' part (genre, feet, distances: what compares two models).
+    ``fold_models``: model folders of the same recipe trained with other songs held out;
+    each is judged on its own held-out songs, and ``folds`` reports every fold and all of
+    them pooled."""
     engine, entry = load_engine()
     report: dict = {
         "model": f"{entry.name} {entry.version}",
@@ -415,7 +483,15 @@ def evaluate(
         report["shared_songs"] = shared_songs(engine, log, names=shared_names)
     held = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
+    folds = [(entry, held.pop("_pooling"), held)]
+    others = [load_engine(folder) for folder in fold_models]
+    require_disjoint_folds([entry, *(e for _, e in others)])
+    for other, other_entry in others:
+        part = held_out(other, seeds, log, takes=other_entry.extra.get("validation_takes"))
+        folds.append((other_entry, part.pop("_pooling"), part))
     report.update(held)
+    if fold_models:
+        report["folds"] = by_fold(folds)
     if not held_out_only:
         report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log)
     return report
@@ -458,11 +534,52 @@ def _feet_by_half(halves: dict | None) -> list[str]:
     ]
 
 
+def _ratios(distances: dict, half: str, kind: str) -> str:
+    rows = distances[half]
+    return " / ".join(f"{rows[g][kind]['ratio']:.2f}" for g in rows if g != "all")
+
+
+def _folds_lines(folds: dict | None) -> list[str]:
+    """One row per fold and one for every fold pooled (pooled genre counts, feet over every
+    dance, distances of the union of held-out songs)."""
+    if not folds:
+        return []
+    pooled = {"fold": "pooled", "model": "every fold", **folds["pooled"]}
+    rows = [*folds["per_fold"], pooled]
+    genres = [g for g in pooled["feature_distances"]["dev"] if g != "all"]
+    lines = [
+        "",
+        "Held out by fold (each fold's model judged on its own held-out songs; pooled: genre "
+        "counts summed, feet over every dance, distances of the union of the held-out songs "
+        "against the real dances of the songs no fold held out). Genre named, dev / test half "
+        f"(lowest genre); feature distance ratios {' / '.join(genres)}:",
+        "",
+        "| fold | model | held-out songs | genre dev / test | sliding generated / real (cm/s) "
+        "| contact score generated / real | songs on the beat | FID_k dev | FID_k test "
+        "| FID_g dev | FID_g test |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        genre = " / ".join(f"{r['genre'][h]['all']:.0%} ({min(r['genre'][h]['per_genre'].values()):.0%})"
+                           for h in DM.HALVES)  # fmt: skip
+        fd = r["feature_distances"]
+        lines.append(
+            f"| {r['fold']} | {r['model']} | {', '.join(r['songs'])} | {genre} | "
+            f"{r['foot_sliding_cm_s']['generated']:.2f} / {r['foot_sliding_cm_s']['real']:.2f} | "
+            f"{r['foot_contact_score']['generated']:.3f} / {r['foot_contact_score']['real']:.3f} | "
+            f"{r['songs_on_the_beat']}/{len(r['songs'])} | {_ratios(fd, 'dev', 'kinetic')} | "
+            f"{_ratios(fd, 'test', 'kinetic')} | {_ratios(fd, 'dev', 'geometric')} | "
+            f"{_ratios(fd, 'test', 'geometric')} |"
+        )
+    return [*lines, "", "Pooled:", "", *DM.distance_table(pooled["feature_distances"])]
+
+
 def markdown(report: dict) -> str:
     lines = [f"**dance** ({report['model']})", ""]
     if "generated_set" in report:
         lines += _generated_set_lines(report["generated_set"]["songs"])
     lines += _held_out_lines(report)
+    lines += _folds_lines(report.get("folds"))
     if "ten_minutes" in report:
         t = report["ten_minutes"]
         lines.append(
@@ -580,6 +697,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="only the held-out songs (genre, feet, distances): to compare models",
     )
+    p.add_argument(
+        "--fold-models",
+        type=Path,
+        action="append",
+        default=[],
+        help="a model folder of the same recipe trained with another fold held out "
+        "(repeatable): every fold is reported, and all of them pooled",
+    )
     args = p.parse_args(argv)
     if args.quick:
         from training.dance import VAL_TAKES
@@ -588,7 +713,8 @@ def main(argv: list[str] | None = None) -> int:
         songs = beat_test_set(patterns=("four_on_the_floor", "break"))
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
     else:
-        report = evaluate(args.seeds, held_out_only=args.held_out_only)
+        report = evaluate(args.seeds, held_out_only=args.held_out_only,
+                          fold_models=args.fold_models)  # fmt: skip
     publish(report, markdown(report), args.json)
     return 0
 

@@ -300,3 +300,67 @@ def test_the_held_out_songs_are_the_models_fold():
     held, train = ED.held_out_songs(TD.FOLDS[1])
     assert sorted(name for name, *_ in held) == sorted(TD.FOLDS[1])
     assert len(train) == 23 - len(TD.FOLDS[1])
+
+
+def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch):
+    """``evaluate(fold_models=...)``: each model folder is judged on the songs its entry
+    holds out, and the pooled row sums the folds. Two copies of the shipped models stand in
+    for the two folds, each holding out one cha-cha of its fold; one seed."""
+    import json
+    import shutil
+
+    from service.config import Settings
+    from tests.conftest import data_path
+    from training import dance as TD
+    from training import eval_dance as ED
+
+    data_path("dance-with-melody")  # skips without the dance data
+    held, train = ED.held_out_songs([*TD.FOLDS[0], *TD.FOLDS[1]])
+    songs = ("DANCE_C_8", "DANCE_C_4")  # a cha-cha of each fold
+    kept = [h for h in held if h[0] in songs]
+    spare = [(h[1], h[2]) for h in held if h[0] not in songs]
+    monkeypatch.setattr(
+        ED, "held_out_songs", lambda takes: ([h for h in kept if h[0] in takes], train + spare)
+    )
+
+    def fold_copy(fold: int, takes: list[str]):
+        folder = tmp_path / f"models-{fold}"
+        if not folder.exists():
+            shutil.copytree(Settings().models_dir[0], folder)
+        manifest = json.loads((folder / "manifest.json").read_text())
+        (entry,) = [m for m in manifest["models"] if m["family"] == "dance"]
+        entry["extra"].update(fold=fold, validation_takes=takes)
+        (folder / "manifest.json").write_text(json.dumps(manifest))
+        return folder
+
+    monkeypatch.setenv("MOTION_MODELS_DIR", str(fold_copy(0, [songs[0]])))
+    report = ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True,
+                         fold_models=[fold_copy(1, [songs[1]])])  # fmt: skip
+    rows, pooled = report["folds"]["per_fold"], report["folds"]["pooled"]
+    assert [(r["fold"], r["songs"]) for r in rows] == [(0, [songs[0]]), (1, [songs[1]])]
+    assert pooled["songs"] == list(songs)
+    for half in ("dev", "test"):
+        counts = [sum(sum(r.values()) for r in f["genre"][half]["confusion"].values())
+                  for f in rows]  # fmt: skip
+        assert counts == [4, 4]  # every genre asked once of each fold's song
+        summed = pooled["genre"][half]["confusion"]
+        assert all(summed[a][n] == sum(f["genre"][half]["confusion"][a][n] for f in rows)
+                   for a in summed for n in summed[a])  # fmt: skip
+    for half in ("dev", "test"):
+        pieces = [f["feature_distances"][half]["cha-cha"]["pieces"]["real"] for f in rows]
+        assert pooled["feature_distances"][half]["cha-cha"]["pieces"]["real"] == sum(pieces)
+    assert pooled["songs_on_the_beat"] == sum(r["songs_on_the_beat"] for r in rows) <= 2
+    text = ED.markdown(report)
+    assert f"| 1 | {rows[1]['model']} | {songs[1]} |" in text
+    assert "| pooled | every fold |" in text
+    from model_export.evaluations import fold_figures
+
+    recorded = fold_figures(report["folds"])
+    assert [f["songs"] for f in recorded["folds"]] == [[songs[0]], [songs[1]]]
+    assert recorded["genre_test_half"]["all"] == pooled["genre"]["test"]["all"]
+    ratios = recorded["feature_distance_ratios_test_half"]["cha-cha"]
+    assert ratios["kinetic"] == pooled["feature_distances"]["test"]["cha-cha"]["kinetic"]["ratio"]
+    fold_copy(1, [songs[0]])  # both folds hold out the same song
+    with pytest.raises(SystemExit, match="folds share held-out songs"):
+        ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True,
+                    fold_models=[tmp_path / "models-1"])  # fmt: skip
