@@ -1,6 +1,6 @@
 """API keys in a real two-worker service (``python -m service --workers 2``) with keys made
-and revoked by ``python -m service keys``: a revoked key is refused within seconds by both
-workers, with no restart; a key's rate and its requests in progress are counted across
+and revoked by ``python -m service keys``: a revoked key is refused from the next request on
+by both workers, with no restart; a key's rate and its requests in progress are counted across
 both workers (429 with ``Retry-After``) while another key's requests succeed; the batch
 command line works against it; and nothing of a key, in the logs, problem bodies or
 ``/metrics`` of the whole run, shows a character of it.
@@ -112,26 +112,21 @@ def run(tmp_path_factory):
         yield Run(server, folder)
 
 
-def test_a_revoked_key_gets_401_within_seconds_from_both_workers(run):
+def test_a_revoked_key_gets_401_from_the_next_request_on_from_both_workers(run):
+    """Each worker checks the keys file at every request, so every request sent after the
+    command returns is refused: no wait, and nothing here depends on the machine's load."""
     key = run.add("revokee")
     assert run.request("GET", "/v1/models", key).status_code == 200
     before = run.per_worker("motion_errors_total", type="unauthorized")
     run.keys_command("revoke", "revokee")
-    revoked_at = time.monotonic()
-    first_refusal = None
-    for _ in range(40):
+    for _ in range(40):  # until both workers have answered some of the requests
         statuses = [r.status_code for r in run.at_once(6, "GET", "/v1/models", key)]
-        if first_refusal is None and 401 in statuses:
-            first_refusal = time.monotonic() - revoked_at
-        if first_refusal is not None:
-            assert statuses == [401] * 6, statuses  # once refused, refused by every worker
-            after = run.per_worker("motion_errors_total", type="unauthorized")
-            refused_by = [pid for pid in after if after[pid] > before.get(pid, 0)]
-            if len(refused_by) == 2:
-                break
+        assert statuses == [401] * 6, statuses
+        after = run.per_worker("motion_errors_total", type="unauthorized")
+        if len([pid for pid in after if after[pid] > before.get(pid, 0)]) == 2:
+            break
     else:
-        pytest.fail(f"not refused by both workers: first refusal after {first_refusal} s")
-    assert first_refusal < 3.0
+        pytest.fail("one worker answered every request after the revocation")
 
 
 def test_a_keys_rate_is_shared_by_both_workers_while_another_key_gets_through(run):
