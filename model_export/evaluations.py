@@ -144,6 +144,7 @@ def fold_figures(folds: dict) -> dict:
         "foot_sliding_cm_s": pooled["foot_sliding_cm_s"],
         "foot_contact_score": pooled["foot_contact_score"],
         "songs_on_the_beat": pooled["songs_on_the_beat"],
+        "whole_songs": pooled["whole_songs"],
         "feature_distance_ratios_test_half": {
             genre: {kind: row[kind]["ratio"] for kind in ("kinetic", "geometric")}
             for genre, row in pooled["feature_distances"]["test"].items()

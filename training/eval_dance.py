@@ -365,6 +365,16 @@ def song_passes(song: dict) -> bool:
                for d in song["generated"])  # fmt: skip
 
 
+def whole_song_figures(rows: dict) -> dict:
+    """Stalls, the slowest 5 s and passes at the danced tempo of ``shared_songs`` rows."""
+    return {
+        "songs": len(rows),
+        "stalls": sum(r["stalls"] for r in rows.values()),
+        "slowest_5s_share": min(r["slowest_5s_share"] for r in rows.values()),
+        "passing_reference_beats": sum(r["passes"] for r in rows.values()),
+    }
+
+
 def _summed(confusions: list[dict]) -> dict:
     return {g: {n: sum(c[g][n] for c in confusions) for n in confusions[0][g]}
             for g in confusions[0]}  # fmt: skip
@@ -380,6 +390,24 @@ def require_disjoint_folds(entries: list) -> list[list[str]]:
     return takes
 
 
+def judge_folds(first: tuple, others: list[tuple], seeds: int, log, shared=None) -> dict:
+    """``by_fold`` of the shipped model's held-out figures (``first``: engine, entry,
+    pooling data, held_out report) and of each other fold's model (``others``: engine,
+    entry), which is judged here on its own songs; each fold's songs also danced whole
+    (stalls, the beats at the danced tempo), taken from ``shared`` where it has them."""
+    folds = [first]
+    for engine, entry in others:
+        part = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
+        folds.append((engine, entry, part.pop("_pooling"), part))
+    for engine, _, pooling, part in folds:
+        names = list(part["songs"])
+        if engine is first[0] and shared and all(n in shared for n in names):
+            pooling["whole_songs"] = {n: shared[n] for n in names}
+        else:
+            pooling["whole_songs"] = shared_songs(engine, log, names)
+    return by_fold([(entry, pooling, part) for _, entry, pooling, part in folds])
+
+
 def by_fold(folds: list[tuple]) -> dict:
     """Every fold's held-out figures and all folds pooled. ``folds``: ``(manifest entry,
     pooling data, held_out report)`` per model of one recipe, each with other songs held
@@ -389,7 +417,7 @@ def by_fold(folds: list[tuple]) -> dict:
     takes = require_disjoint_folds([entry for entry, _, _ in folds])
     every = [t for ts in takes for t in ts]
     rows = []
-    for i, ((entry, _, part), songs) in enumerate(zip(folds, takes, strict=True)):
+    for i, ((entry, pooling, part), songs) in enumerate(zip(folds, takes, strict=True)):
         rows.append({
             "fold": entry.extra.get("fold", i),  # entries exported before folds: fold 0
             "model": f"{entry.name} {entry.version}",
@@ -398,6 +426,7 @@ def by_fold(folds: list[tuple]) -> dict:
             "foot_sliding_cm_s": part["foot_sliding_cm_s"],
             "foot_contact_score": part["foot_contact_score"],
             "songs_on_the_beat": sum(song_passes(s) for s in part["songs"].values()),
+            "whole_songs": whole_song_figures(pooling["whole_songs"]),
             "feature_distances": part["feature_distances"],
         })  # fmt: skip
     held, rest = held_out_songs(every)
@@ -412,6 +441,8 @@ def by_fold(folds: list[tuple]) -> dict:
         "foot_sliding_cm_s": feet["sliding"],
         "foot_contact_score": feet["contact"],
         "songs_on_the_beat": sum(r["songs_on_the_beat"] for r in rows),
+        "whole_songs": whole_song_figures({n: w for _, p, _ in folds
+                                           for n, w in p["whole_songs"].items()}),
         "feature_distances": DM.feature_distances(held, rest, generated),
     }  # fmt: skip
     return {"per_fold": rows, "pooled": pooled}
@@ -470,6 +501,8 @@ def evaluate(
     each is judged on its own held-out songs, and ``folds`` reports every fold and all of
     them pooled."""
     engine, entry = load_engine()
+    others = [load_engine(folder) for folder in fold_models]
+    require_disjoint_folds([entry, *(e for _, e in others)])
     report: dict = {
         "model": f"{entry.name} {entry.version}",
         "model_name": entry.name,
@@ -483,15 +516,11 @@ def evaluate(
         report["shared_songs"] = shared_songs(engine, log, names=shared_names)
     held = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
-    folds = [(entry, held.pop("_pooling"), held)]
-    others = [load_engine(folder) for folder in fold_models]
-    require_disjoint_folds([entry, *(e for _, e in others)])
-    for other, other_entry in others:
-        part = held_out(other, seeds, log, takes=other_entry.extra.get("validation_takes"))
-        folds.append((other_entry, part.pop("_pooling"), part))
+    pooling = held.pop("_pooling")
     report.update(held)
-    if fold_models:
-        report["folds"] = by_fold(folds)
+    if others:
+        first = (engine, entry, pooling, held)
+        report["folds"] = judge_folds(first, others, seeds, log, report.get("shared_songs"))
     if not held_out_only:
         report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log)
     return report
@@ -555,19 +584,21 @@ def _folds_lines(folds: dict | None) -> list[str]:
         f"(lowest genre); feature distance ratios {' / '.join(genres)}:",
         "",
         "| fold | model | held-out songs | genre dev / test | sliding generated / real (cm/s) "
-        "| contact score generated / real | songs on the beat | FID_k dev | FID_k test "
-        "| FID_g dev | FID_g test |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| contact score generated / real | on the tracked beats | whole: stalls, slowest 5 s, "
+        "on the danced beats | FID_k dev | FID_k test | FID_g dev | FID_g test |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         genre = " / ".join(f"{r['genre'][h]['all']:.0%} ({min(r['genre'][h]['per_genre'].values()):.0%})"
                            for h in DM.HALVES)  # fmt: skip
-        fd = r["feature_distances"]
+        fd, w = r["feature_distances"], r["whole_songs"]
         lines.append(
             f"| {r['fold']} | {r['model']} | {', '.join(r['songs'])} | {genre} | "
             f"{r['foot_sliding_cm_s']['generated']:.2f} / {r['foot_sliding_cm_s']['real']:.2f} | "
             f"{r['foot_contact_score']['generated']:.3f} / {r['foot_contact_score']['real']:.3f} | "
-            f"{r['songs_on_the_beat']}/{len(r['songs'])} | {_ratios(fd, 'dev', 'kinetic')} | "
+            f"{r['songs_on_the_beat']}/{len(r['songs'])} | {w['stalls']}, "
+            f"{w['slowest_5s_share']:.0%}, {w['passing_reference_beats']}/{w['songs']} | "
+            f"{_ratios(fd, 'dev', 'kinetic')} | "
             f"{_ratios(fd, 'test', 'kinetic')} | {_ratios(fd, 'dev', 'geometric')} | "
             f"{_ratios(fd, 'test', 'geometric')} |"
         )

@@ -350,6 +350,10 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
         pieces = [f["feature_distances"][half]["cha-cha"]["pieces"]["real"] for f in rows]
         assert pooled["feature_distances"][half]["cha-cha"]["pieces"]["real"] == sum(pieces)
     assert pooled["songs_on_the_beat"] == sum(r["songs_on_the_beat"] for r in rows) <= 2
+    whole = [r["whole_songs"] for r in rows]  # each fold's song danced whole by its model
+    assert [w["songs"] for w in whole] == [1, 1] and pooled["whole_songs"]["songs"] == 2
+    assert pooled["whole_songs"]["stalls"] == sum(w["stalls"] for w in whole)
+    assert pooled["whole_songs"]["slowest_5s_share"] == min(w["slowest_5s_share"] for w in whole)
     text = ED.markdown(report)
     assert f"| 1 | {rows[1]['model']} | {songs[1]} |" in text
     assert "| pooled | every fold |" in text
@@ -358,6 +362,7 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     recorded = fold_figures(report["folds"])
     assert [f["songs"] for f in recorded["folds"]] == [[songs[0]], [songs[1]]]
     assert recorded["genre_test_half"]["all"] == pooled["genre"]["test"]["all"]
+    assert recorded["whole_songs"] == pooled["whole_songs"]
     ratios = recorded["feature_distance_ratios_test_half"]["cha-cha"]
     assert ratios["kinetic"] == pooled["feature_distances"]["test"]["cha-cha"]["kinetic"]["ratio"]
     fold_copy(1, [songs[0]])  # both folds hold out the same song
