@@ -133,9 +133,13 @@ show-styles: $(VENV)/.dev
 # already finished; DANCE_ARGS="--from-scratch" retrains every stage. eval-dance: the generated beat test
 # set (tracker F-measure, alignment to known beats vs shifted grids), every shared song, the
 # held-out songs vs real dances, stalls over 10 minutes, genre recognition, foot sliding and
-# contact score, AIST++ feature distances to real dance (development and test halves).
+# contact score, AIST++ feature distances to real dance (development and test halves); and
+# every fold: train-dance-fold1 replays the same schedule with fold 1's songs held out
+# (training.dance.FOLDS) into checkpoints/dance-fold1.pt, which eval-dance exports to
+# runs/eval/models-fold1 and judges on its own songs beside the shipped model, then pools.
 DANCE_ARGS ?=
-.PHONY: dance-alignment dance-tempo train-dance export-dance eval-dance show-dance
+DANCE_FOLD1 := checkpoints/dance-fold1.pt
+.PHONY: dance-alignment dance-tempo train-dance train-dance-fold1 export-dance eval-dance show-dance
 dance-alignment: $(VENV)/.dev
 	$(PY) -m training.dance_alignment --write
 
@@ -147,11 +151,18 @@ dance-tempo: $(VENV)/.dev
 train-dance: $(VENV)/.dev
 	$(PY) -m training.dance_schedule $(DANCE_ARGS)
 
+train-dance-fold1: $(VENV)/.dev
+	$(PY) -m training.dance_schedule --fold 1 --work checkpoints/dance-stages/fold1 \
+		--out $(DANCE_FOLD1) $(DANCE_ARGS)
+
 export-dance: $(VENV)/.dev
 	$(PY) -m model_export.dance
 
 eval-dance: $(VENV)/.dev
-	$(PY) -m training.eval_dance --json runs/eval/dance.json
+	rm -rf runs/eval/models-fold1
+	$(PY) -m model_export.dance --checkpoint $(DANCE_FOLD1) --models-dir runs/eval/models-fold1 \
+		--name dance-dwm-fold1
+	$(PY) -m training.eval_dance --json runs/eval/dance.json --fold-models runs/eval/models-fold1
 	$(PY) -m model_export.evaluations runs/eval/dance.json
 
 show-dance: $(VENV)/.dev

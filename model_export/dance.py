@@ -223,6 +223,7 @@ def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--checkpoint", type=Path, default=TD.CHECKPOINT)
     p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
+    p.add_argument("--name", default=MODEL_NAME, help="the manifest entry's name")
     args = p.parse_args(argv)
     model, stats, ckpt = TD.load_checkpoint(args.checkpoint)
     from training.dance_alignment import load_table
@@ -249,6 +250,7 @@ def main(argv: list[str] | None = None) -> dict:
             "validation_takes": list(TD.held_out_takes(ckpt)),
         },
         trained_at=ckpt.get("saved_at"),
+        name=args.name,
     )
     print(f"manifest: {entry['name']} {entry['metrics']['parity_max_abs']}")
     return entry
