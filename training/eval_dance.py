@@ -433,11 +433,10 @@ def by_fold(folds: list[tuple]) -> dict:
     generated = {n: d for _, pooling, _ in folds for n, d in pooling["generated"].items()}
     feet = {m: {k: round(float(np.mean([x for _, p, _ in folds for x in p[m][k]])), 3)
                 for k in ("real", "generated")} for m in ("sliding", "contact")}  # fmt: skip
-    halves = DM.HALVES
     pooled = {
         "songs": every,
         "genre": {h: genre_accuracy(_summed([p["genre_accuracy"]["by_half"][h]["confusion"]
-                                             for _, _, p in folds])) for h in halves},
+                                             for _, _, p in folds])) for h in DM.HALVES},
         "foot_sliding_cm_s": feet["sliding"],
         "foot_contact_score": feet["contact"],
         "songs_on_the_beat": sum(r["songs_on_the_beat"] for r in rows),
