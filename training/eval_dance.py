@@ -72,6 +72,12 @@ BLOCK = 30.0  # seconds per energy block
 PASS_SCORE, PASS_RATIO = 0.2, 1.5  # the issue's bar on every generated pattern and tempo
 
 
+def on_the_beat(score: float, chance: float) -> bool:
+    """A beat alignment at the issue's bar: at least ``PASS_SCORE`` and ``PASS_RATIO`` times
+    its shifted grids'."""
+    return bool(score >= PASS_SCORE and score >= PASS_RATIO * chance)
+
+
 def load_engine(models: Path | None = None):
     """The dance engine of folder ``models`` (default the first model folder: the shipped
     one) and its manifest entry."""
@@ -153,9 +159,7 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
             row["dances"].append({"genre": genre, "bas": round(score, 4),
                                   "chance": round(chance, 4),
                                   **stall_figures(out, feats.playing)})  # fmt: skip
-        row["passes"] = all(
-            d["bas"] >= PASS_SCORE and d["bas"] >= PASS_RATIO * d["chance"] for d in row["dances"]
-        )
+        row["passes"] = all(on_the_beat(d["bas"], d["chance"]) for d in row["dances"])
         rows.append(row)
         log(f"{song.name}: {json.dumps(row)}")
     return {"songs": rows, "seeds": seeds}
@@ -201,7 +205,7 @@ def shared_songs(engine, log=print, names=None) -> dict:
             "chance": round(result.bas_chance, 4),
             "bas_reference": round(known, 4),
             "chance_reference": round(known_chance, 4),
-            "passes": bool(known >= PASS_SCORE and known >= PASS_RATIO * known_chance),
+            "passes": on_the_beat(known, known_chance),
             **stall_figures(result.motion, playing),
         }
         log(f"{folder.name}: {json.dumps(rows[folder.name])}")
@@ -361,8 +365,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
 
 def song_passes(song: dict) -> bool:
     """Every dance generated for a held-out song in its genre is on the tracker's beats."""
-    return all(d["bas"] >= PASS_SCORE and d["bas"] >= PASS_RATIO * d["chance"]
-               for d in song["generated"])  # fmt: skip
+    return all(on_the_beat(d["bas"], d["chance"]) for d in song["generated"])
 
 
 def whole_song_figures(rows: dict) -> dict:
