@@ -369,3 +369,73 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     with pytest.raises(SystemExit, match="folds share held-out songs"):
         ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True,
                     fold_models=[tmp_path / "models-1"])  # fmt: skip
+
+
+def test_a_mixture_samples_its_components_and_learns_their_spread(walk):
+    """The draw's uniform picks the component (cumulative probability), its normals scale
+    that component's std; the likelihood loss fits a std to the data's spread."""
+    from training import dance as TD
+
+    torch.manual_seed(0)
+    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32, mixture=3)).eval()
+    centre, logits, offsets, log_std = model.mixture(torch.randn(2, 32))
+    cumulative = torch.softmax(logits, -1).cumsum(-1)
+    draw = torch.zeros(2, DF.MOTION_CHANNELS + 1)
+    for k in range(3):
+        draw[:, -1] = cumulative[:, k] - 1e-4 if k < 2 else 0.9999
+        want = centre + offsets[:, k]
+        assert torch.allclose(model.sample(centre, logits, offsets, log_std, draw), want)
+    draw[:, :-1] = 1.0
+    picked = model.sample(centre, logits, offsets, log_std, draw) - centre - offsets[:, 2]
+    assert torch.allclose(picked, log_std[:, 2].exp(), atol=1e-6)
+    mean = model.step(torch.zeros(1, 16), torch.zeros(1, len(DF.GENRES)),
+                      torch.zeros(1, DF.MOTION_CHANNELS), *model.init_state(1))[0]  # fmt: skip
+    assert mean.shape == (1, DF.MOTION_CHANNELS)
+
+    top = torch.zeros(256, 32)  # one input, targets spread at std 0.5 around 1
+    target = 1.0 + 0.5 * torch.randn(256, DF.MOTION_CHANNELS)
+    opt = torch.optim.Adam(model.mix.parameters(), lr=0.05)
+    model.train()
+    for _ in range(300):
+        loss = model.nll(model.mixture(top), target)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    with torch.no_grad():
+        centre, logits, offsets, log_std = model.mixture(top[:1])
+    weights = torch.softmax(logits, -1)[0]
+    spread = (weights[:, None] * log_std[0].exp()).sum(0)
+    assert 0.4 < float(spread.mean()) < 0.6  # the initial std is 0.3
+    mean = centre[0] + (weights[:, None] * offsets[0]).sum(0)
+    assert abs(float(mean.mean()) - 1.0) < 0.1
+
+
+def test_a_mixture_trains_on_its_own_samples_and_exports_with_its_draw(tmp_path, walk):
+    from model_export import dance as ED
+    from training import dance as TD
+    from training.dance_data import Sequence, WindowSampler
+    from training.dance_losses import Losses
+
+    torch.manual_seed(0)
+    stats, m = _stats(walk)
+    seq = Sequence("walk", 3, np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32), m, True, True)
+    sampler = WindowSampler([seq], stats, 24, 0.0, seed=0)
+    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32, mixture=2))
+    args = TD.parse_args(["--window", "24", "--cond-ramp", "1", "--mixture", "2"])
+    weights = {**TD.WEIGHTS, "nll": 1.0}
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+    rng = np.random.default_rng(0)
+    nll = []
+    for step in range(20):
+        parts = TD.train_step(model, Losses(stats), sampler.batch(4), args, rng, step, weights)
+        nll.append(float(parts["nll"].detach()))
+        opt.zero_grad()
+        parts["total"].backward()
+        opt.step()
+    assert all(np.isfinite(nll)) and nll[-1] < nll[0]
+
+    (tmp_path / "manifest.json").write_text('{"schema_version": 1, "models": []}')
+    entry = ED.export_bundle(model.eval(), stats, m[:4], tmp_path)
+    assert entry["metrics"]["parity_max_abs"]["step"] < 1e-4
+    names = [i["name"] for i in entry["graphs"]["step"]["inputs"]]
+    assert names[-1] == "draw"
