@@ -76,13 +76,10 @@ WEIGHTS = {
     "match": 0.0,
     "diversity": 0.0,
     "free_skate": 0.0,
-    "nll": 0.0,
 }
 GUARDS = ("judge", "prior", "match", "diversity", "free_skate")
 """The loss terms that need the judge of real dances (``training.dance_genre``)."""
 SCHEDULE = Path(__file__).with_name("dance_schedule.json")
-INITIAL_LOG_STD = math.log(0.3)  # standardised units: about a one-frame prediction's error
-MIN_LOG_STD = math.log(0.01)
 
 
 def split(seqs: list[Sequence], val_takes=VAL_TAKES) -> tuple[list[Sequence], list[Sequence]]:
@@ -118,7 +115,6 @@ class Config:
     genre_dim: int = 16
     dropout: float = 0.25
     film: bool = False  # the genre also scales and shifts each LSTM layer's output
-    mixture: int = 0  # components of a Gaussian mixture over the next pose (0: its mean only)
 
 
 class DanceNet(nn.Module):
@@ -153,14 +149,6 @@ class DanceNet(nn.Module):
             for layer in (self.film1, self.film2):
                 nn.init.zeros_(layer.weight)
                 nn.init.zeros_(layer.bias)
-        if cfg.mixture:  # offsets from ``out`` per component, their log std, their logits
-            self.mix = nn.Linear(cfg.hidden, cfg.mixture * (2 * DF.MOTION_CHANNELS + 1))
-            nn.init.normal_(self.mix.weight, std=0.02)  # small, unequal: components part
-            nn.init.zeros_(self.mix.bias)
-            with torch.no_grad():
-                self.mix.bias[cfg.mixture : cfg.mixture * (DF.MOTION_CHANNELS + 1)] = (
-                    INITIAL_LOG_STD
-                )
 
     def encode_audio(self, audio: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         code = self.audio(audio)
@@ -170,58 +158,14 @@ class DanceNet(nn.Module):
         z = torch.zeros(batch, self.config.hidden)
         return z, z, z, z
 
-    def step(self, code, genre, prev, h1, c1, h2, c2, draw=None):
-        """The next pose: the mixture's mean, or with ``draw`` ``(B, M + 1)`` (standard
-        normal per channel, then a uniform) a sample of it (:meth:`sample`)."""
-        top, *state = self.hidden_step(code, genre, prev, h1, c1, h2, c2)
-        if not self.config.mixture:
-            return self.out(top), *state
-        params = self.mixture(top)
-        if draw is None:
-            centre, logits, offsets, _ = params
-            weights = torch.softmax(logits, dim=-1).unsqueeze(-1)
-            return centre + (weights * offsets).sum(dim=1), *state
-        return self.sample(*params, draw), *state
-
-    def hidden_step(self, code, genre, prev, h1, c1, h2, c2):
-        """The last layer's output and the new states."""
+    def step(self, code, genre, prev, h1, c1, h2, c2):
         x = torch.cat([code, self.genre(genre), prev], dim=-1)
         h1, c1 = self.cell1(x, (h1, c1))
         if not self.config.film:
             h2, c2 = self.cell2(self.drop(h1), (h2, c2))
-            return h2, h1, c1, h2, c2
+            return self.out(h2), h1, c1, h2, c2
         h2, c2 = self.cell2(self._film(self.film1, genre, self.drop(h1)), (h2, c2))
-        return self._film(self.film2, genre, h2), h1, c1, h2, c2
-
-    def mixture(self, top: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """``centre (B, M)``, ``logits (B, K)``, ``offsets`` and ``log_std (B, K, M)``: each
-        component's mean is the centre plus its offset."""
-        k, m = self.config.mixture, DF.MOTION_CHANNELS
-        raw = self.mix(top)
-        logits = raw[:, :k]
-        log_std = raw[:, k : k * (m + 1)].reshape(-1, k, m).clamp(MIN_LOG_STD, 2.0)
-        offsets = raw[:, k * (m + 1) :].reshape(-1, k, m)
-        return self.out(top), logits, offsets, log_std
-
-    @staticmethod
-    def sample(centre, logits, offsets, log_std, draw):
-        """The component whose cumulative probability first exceeds the uniform
-        ``draw[:, -1]``, its mean plus its std times the normal ``draw[:, :-1]``."""
-        cumulative = torch.cumsum(torch.softmax(logits, dim=-1), dim=-1)
-        pick = (cumulative < draw[:, -1:]).sum(dim=-1).clamp(max=logits.shape[-1] - 1)
-        index = pick[:, None, None].expand(-1, 1, offsets.shape[-1])
-        chosen = (
-            offsets.gather(1, index)[:, 0] + log_std.gather(1, index)[:, 0].exp() * draw[:, :-1]
-        )
-        return centre + chosen
-
-    def nll(self, params: tuple[torch.Tensor, ...], target: torch.Tensor) -> torch.Tensor:
-        """Negative log-likelihood per channel of ``target (B, M)`` under the mixture."""
-        centre, logits, offsets, log_std = params
-        z = (target[:, None] - centre[:, None] - offsets) / log_std.exp()
-        per = -0.5 * z**2 - log_std - 0.5 * math.log(2 * math.pi)
-        joint = torch.logsumexp(torch.log_softmax(logits, dim=-1) + per.sum(-1), dim=-1)
-        return -joint.mean() / target.shape[-1]
+        return self.out(self._film(self.film2, genre, h2)), h1, c1, h2, c2
 
     def _film(self, layer: nn.Linear, genre: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """``x * (1 + scale) + shift``, both linear in the genre; the weights are split (and
@@ -254,34 +198,6 @@ class DanceNet(nn.Module):
                 prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
         return torch.stack(outs, dim=1)
 
-    def sampled_rollout(
-        self, code, genre, motion, gt_mask: torch.Tensor | None = None, warm: int = 0
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """As :meth:`rollout`, but each self-fed frame is a sample of the mixture: the
-        mixture's means ``(B, T - 1, M)`` and the mean negative log-likelihood per channel
-        of the ground truth."""
-        state = self.init_state(motion.shape[0])
-        prev = motion[:, 0]
-        outs, nll = [], torch.zeros(())
-        batch, m = motion.shape[0], motion.shape[-1]
-        for t in range(1, motion.shape[1]):
-            top, *state = self.hidden_step(code[:, t], genre, prev, *state)
-            params = self.mixture(top)
-            nll = nll + self.nll(params, motion[:, t]) / (motion.shape[1] - 1)
-            centre, logits, offsets, _ = params
-            outs.append(centre + (torch.softmax(logits, -1).unsqueeze(-1) * offsets).sum(1))
-            draw = torch.cat([torch.randn(batch, m), torch.rand(batch, 1)], dim=-1)
-            pose = self.sample(*params, draw)
-            if t < warm:
-                prev = motion[:, t]
-            elif gt_mask is None:
-                prev = pose
-            elif gt_mask.dim() == 1:
-                prev = motion[:, t] if bool(gt_mask[t]) else pose
-            else:
-                prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
-        return torch.stack(outs, dim=1), nll
-
 
 def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.Tensor:
     """``(frames,)`` bool: ground-truth stretches of ``gt`` frames alternating with self-fed
@@ -306,12 +222,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="start from this checkpoint's weights, statistics and start poses "
                    "(a new schedule from step 0; layers it lacks start at zero)")  # fmt: skip
     p.add_argument("--film", action="store_true", help="genre FiLM on both LSTM layers")
-    p.add_argument("--mixture", type=int, default=0,
-                   help="Gaussian mixture components over the next pose (0: its mean)")  # fmt: skip
     p.add_argument("--stage", default=None,
                    help="the schedule stage this run is (recorded once its steps are done)")  # fmt: skip
-    p.add_argument("--head-only", action="store_true",
-                   help="train only the mixture head; the rest stays as --init gave it")  # fmt: skip
     p.add_argument("--swap-share", type=float, default=0.0,
                    help="share of music windows asked another genre (judge and prior only)")  # fmt: skip
     p.add_argument("--guard-all", action="store_true",
@@ -388,14 +300,14 @@ def load_checkpoint(path: Path = CHECKPOINT) -> tuple[DanceNet, DF.DanceStats, d
 
 
 def init_from(path: Path, config: Config) -> tuple[DanceNet, DF.DanceStats, dict]:
-    """A network with the weights of checkpoint ``path`` and its sizes, FiLM and mixture as
-    ``config`` says (layers the checkpoint lacks keep their start); the checkpoint."""
+    """A network with the weights of checkpoint ``path`` and its sizes, FiLM as ``config``
+    says (layers the checkpoint lacks keep their zero start); the checkpoint."""
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     config = dataclasses.replace(config, **{k: v for k, v in ckpt["net_config"].items()
-                                            if k not in ("film", "mixture")})  # fmt: skip
+                                            if k != "film"})  # fmt: skip
     model = DanceNet(config)
     missing, unexpected = model.load_state_dict(ckpt["model"], strict=False)
-    if unexpected or any(not k.startswith(("film", "mix.")) for k in missing):
+    if unexpected or any(not k.startswith("film") for k in missing):
         raise ValueError(f"{path} does not fit: missing {missing}, unexpected {unexpected}")
     model.train()
     return model, DF.DanceStats.from_arrays(ckpt["stats"]), ckpt
@@ -420,10 +332,7 @@ def train_step(
     mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng)
     if swapped.any():  # a swapped window has no ground truth to feed back
         mask = mask[None].expand(len(genre), -1) & ~swapped[:, None]
-    if model.config.mixture:
-        pred, nll = model.sampled_rollout(code, cond_vec, motion, mask, warm=args.warm)
-    else:
-        pred, nll = model.rollout(code, cond_vec, motion, mask, warm=args.warm), torch.zeros(())
+    pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
     if swapped.all():
         parts = {k: torch.zeros(()) for k in ("feat", "pos", "effort", "skate")}
     else:
@@ -434,7 +343,6 @@ def train_step(
         parts["genre"] = torch.zeros(())
     for k in GUARDS:
         parts[k] = torch.zeros(())
-    parts["nll"] = nll
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
         parts["judge"] = judge.judged(judge(frames), asked[music])
@@ -502,7 +410,7 @@ def train(args: argparse.Namespace) -> None:
         poses, step, best = ckpt["start_poses"], int(ckpt["step"]), ckpt.get("best_val")
         stages = list(ckpt.get("stages", []))
     elif args.init is not None:
-        model, stats, start = init_from(args.init, Config(film=args.film, mixture=args.mixture))
+        model, stats, start = init_from(args.init, Config(film=args.film))
         require_fold(start, args.fold, args.init)
         poses, stages, step, best, ckpt = (
             start["start_poses"],
@@ -515,15 +423,14 @@ def train(args: argparse.Namespace) -> None:
         stats = DF.DanceStats.fit([s.audio for s in train_seqs if s.has_music],
                                   [s.motion for s in train_seqs])  # fmt: skip
         model, step, best, ckpt = (
-            DanceNet(Config(hidden=args.hidden, film=args.film, mixture=args.mixture)),
+            DanceNet(Config(hidden=args.hidden, film=args.film)),
             0,
             None,
             None,
         )
         poses, stages = start_poses(train_seqs), []
     losses = Losses(stats)
-    trained = model.mix.parameters() if args.head_only else model.parameters()
-    optimiser = torch.optim.AdamW(trained, lr=args.lr, weight_decay=1e-4)
+    optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     if ckpt is not None and optimiser_path(args.checkpoint).exists():
         optimiser.load_state_dict(torch.load(optimiser_path(args.checkpoint), weights_only=False))
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)

@@ -20,8 +20,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import signal as scipy_signal
-from scipy import special as scipy_special
 
 from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
@@ -106,9 +104,6 @@ class DanceEngine(Engine):
         self.stats = DF.DanceStats.from_arrays(arrays)
         self.start_poses = np.asarray(arrays["start_poses"], np.float32)
         self.hidden = int(self.entry.extra["hidden"])
-        self.sampling = self.entry.extra.get("sampling")  # a mixture network's
-        if self.sampling and not 0 <= float(self.sampling["correlation"]) < 1:
-            raise ValueError("the bundle's sampling correlation is outside [0, 1)")
         if list(self.entry.extra.get("genres", DF.GENRES)) != list(DF.GENRES):
             raise ValueError("the bundle's genres differ from motion.dance_features.GENRES")
 
@@ -142,32 +137,13 @@ class DanceEngine(Engine):
         prev = start[None].astype(np.float32)
         noise = (NOISE * rng.standard_normal((frames, DF.MOTION_CHANNELS))).astype(np.float32)
         noise[:, DF.CONTACTS] = 0.0
-        draws = self.draws(frames, rng) if self.sampling else None
         session = self.sessions["step"]
         for t in range(1, frames):
             feeds["code"] = code[t : t + 1]
             feeds["prev"] = prev + noise[t]
-            if draws is not None:
-                feeds["draw"] = draws[t : t + 1]
             pose, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = session.run(None, feeds)
             out[t] = pose[0]
             prev = pose
-        return out
-
-    def draws(self, frames: int, rng: np.random.Generator) -> np.ndarray:
-        """``(F, M + 1)`` draws of a mixture network's samples: per channel a standard normal
-        times the temperature (none on the contacts, which the feet step decides), then a
-        uniform picking the component; each an AR(1) series of the bundle's correlation, so
-        a sample strays from one frame to the next smoothly rather than as jitter."""
-        rho = float(self.sampling["correlation"])
-        scale = math.sqrt(1 - rho * rho)
-        white = rng.standard_normal((frames, DF.MOTION_CHANNELS + 1))
-        white[0] /= scale  # the series starts at its stationary variance, 1
-        series = scipy_signal.lfilter([scale], [1.0, -rho], white, axis=0)
-        out = series.astype(np.float32)
-        out[:, :-1] *= float(self.sampling["temperature"])
-        out[:, DF.CONTACTS] = 0.0
-        out[:, -1] = scipy_special.ndtr(series[:, -1])
         return out
 
     # --- the three steps ---------------------------------------------------------------------
