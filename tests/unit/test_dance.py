@@ -369,3 +369,67 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     with pytest.raises(SystemExit, match="folds share held-out songs"):
         ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True,
                     fold_models=[tmp_path / "models-1"])  # fmt: skip
+
+
+def test_a_latent_starts_at_zero_as_the_network_it_fine_tunes_then_changes_the_dance(
+    tmp_path, walk
+):
+    from model_export import dance as ED
+    from training import dance as TD
+    from training.dance_data import Sequence, WindowSampler
+    from training.dance_losses import Losses
+
+    torch.manual_seed(0)
+    stats, m = _stats(walk)
+    seq = Sequence("walk", 3, np.zeros((len(m), DF.AUDIO_CHANNELS), np.float32), m, True, True)
+    sampler = WindowSampler([seq], stats, 24, 0.0, seed=0)
+    plain = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval()
+    torch.save({"model": plain.state_dict(), "net_config": {"hidden": 32, "code": 16,
+                "audio_hidden": 32}, "stats": stats.arrays()}, tmp_path / "plain.pt")  # fmt: skip
+    model, _, _ = TD.init_from(tmp_path / "plain.pt", TD.Config(latent=4))
+    audio, motion, _, _ = sampler.batch(2)
+    code, _ = model.encode_audio(audio)
+    genre = torch.zeros(2, len(DF.GENRES))
+    model.eval()
+    with torch.no_grad():
+        want = plain.rollout(code, genre, motion)
+        got = model.rollout(code, genre, motion, latent=torch.zeros(2, motion.shape[1], 4))
+    assert torch.equal(want, got)
+    with torch.no_grad():  # the prior starts as the standard normal: a draw is the latent
+        draw = torch.randn(2, 4)
+        state = model.init_state(2)
+        h1, c1 = model.first_cell(code[:, 1], genre, motion[:, 0], *state[:2])
+        want = model.second_cell(genre, h1, c1, *state[2:], draw)
+        got = model.step(code[:, 1], genre, motion[:, 0], *state, draw)
+        assert all(torch.equal(w, g) for w, g in zip(want, got, strict=True))
+        # windows whose latent comes from the prior (no ground truth) add nothing to the KL
+        everywhere = torch.ones(motion.shape[1], dtype=torch.bool)
+        _, kl = model.encoded_rollout(code, genre, motion, everywhere, 0, torch.ones(2).bool())
+        assert float(kl) == 0.0
+        _, kl = model.encoded_rollout(code, genre, motion, everywhere, 0, torch.zeros(2).bool())
+        assert float(kl) > 0.0
+
+    args = TD.parse_args(["--window", "24", "--cond-ramp", "1", "--latent", "4",
+                          "--latent-only"])  # fmt: skip
+    weights = {**TD.WEIGHTS, "kl": 0.02}
+    model.train()
+    opt = torch.optim.Adam([p for n, p in model.named_parameters()
+                            if n.startswith(("latent_in", "posterior"))], lr=3e-3)  # fmt: skip
+    rng = np.random.default_rng(0)
+    for step in range(10):
+        parts = TD.train_step(model, Losses(stats), sampler.batch(4), args, rng, step, weights)
+        assert float(parts["kl"].detach()) >= 0 and all(torch.isfinite(v) for v in parts.values())
+        opt.zero_grad()
+        parts["total"].backward()
+        opt.step()
+    model.eval()
+    with torch.no_grad():
+        a = model.rollout(code, genre, motion, latent=torch.full((2, motion.shape[1], 4), 2.0))
+        b = model.rollout(code, genre, motion, latent=torch.full((2, motion.shape[1], 4), -2.0))
+    assert float((a - b).abs().max()) > 1e-3  # the trained latent moves the dance
+
+    (tmp_path / "manifest.json").write_text('{"schema_version": 1, "models": []}')
+    entry = ED.export_bundle(model, stats, m[:4], tmp_path)
+    assert entry["metrics"]["parity_max_abs"]["step"] < 1e-4
+    inputs = {i["name"]: i["shape"] for i in entry["graphs"]["step"]["inputs"]}
+    assert inputs["draw"] == ["batch", 4]
