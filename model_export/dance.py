@@ -60,14 +60,8 @@ class StepGraph(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, code, genre, prev, h1, c1, h2, c2, *draw):
-        return self.model.step(code, genre, prev, h1, c1, h2, c2, *draw)
-
-
-def step_inputs(model: TD.DanceNet) -> list[str]:
-    """The step graph's inputs: a network with a latent also takes a standard normal draw,
-    which its prior turns into the latent."""
-    return ["code", "genre", "prev", *STATE_NAMES, *(["draw"] if model.config.latent else [])]
+    def forward(self, code, genre, prev, h1, c1, h2, c2):
+        return self.model.step(code, genre, prev, h1, c1, h2, c2)
 
 
 def _export(module, args, path: Path, inputs, outputs, dynamic) -> None:
@@ -102,25 +96,23 @@ def export_graphs(model: TD.DanceNet, out: Path) -> None:
         {"audio": {0: "batch", 1: "time"}, "code": {0: "batch", 1: "time"},
          "genre_probs": {0: "batch"}},
     )  # fmt: skip
-    inputs = step_inputs(model)
+    step_inputs = ["code", "genre", "prev", *STATE_NAMES]
     step_outputs = ["pose", *(f"{n}_out" for n in STATE_NAMES)]
     zeros = torch.zeros(1, hidden)
-    draw = (torch.zeros(1, model.config.latent),) if model.config.latent else ()
     _export(
         StepGraph(model),
         (torch.zeros(1, code), torch.zeros(1, len(DF.GENRES)),
-         torch.zeros(1, DF.MOTION_CHANNELS), zeros, zeros, zeros, zeros, *draw),
+         torch.zeros(1, DF.MOTION_CHANNELS), zeros, zeros, zeros, zeros),
         out / "step.onnx",
-        inputs,
+        step_inputs,
         step_outputs,
-        {name: {0: "batch"} for name in inputs + step_outputs},
+        {name: {0: "batch"} for name in step_inputs + step_outputs},
     )  # fmt: skip
 
 
 def graph_specs(model: TD.DanceNet) -> dict:
     hidden, code = model.config.hidden, model.config.code
     states = [(n, ["batch", hidden]) for n in STATE_NAMES]
-    draw = [("draw", ["batch", model.config.latent])] if model.config.latent else []
     return {
         "audio": MF.graph_spec(
             f"{FOLDER}/audio.onnx",
@@ -132,7 +124,7 @@ def graph_specs(model: TD.DanceNet) -> dict:
             f"{FOLDER}/step.onnx",
             OPSET,
             [("code", ["batch", code]), ("genre", ["batch", len(DF.GENRES)]),
-             ("prev", ["batch", DF.MOTION_CHANNELS]), *states, *draw],
+             ("prev", ["batch", DF.MOTION_CHANNELS]), *states],
             [("pose", ["batch", DF.MOTION_CHANNELS]), *((f"{n}_out", s) for n, s in states)],
         ),
     }  # fmt: skip
@@ -167,17 +159,12 @@ def parity(model: TD.DanceNet, out: Path, seed: int = 0, steps: int = PARITY_STE
     prev_t = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
     state_t = model.init_state(batch)
     worst_step = 0.0
-    draw = ()
-    if model.config.latent:
-        draw = (torch.randn(batch, model.config.latent, generator=gen),)
     for t in range(steps):
         feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_t.numpy()}
         feeds.update({n: s.numpy() for n, s in zip(STATE_NAMES, state_t, strict=True)})
-        if draw:
-            feeds["draw"] = draw[0].numpy()
         got = step.run(None, feeds)
         with torch.no_grad():
-            prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t, *draw)
+            prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
         for g, w in zip(got, [prev_t, *state_t], strict=True):
             w = w.numpy()
             if not np.allclose(g, w, rtol=RTOL, atol=ATOL):
@@ -237,10 +224,6 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--checkpoint", type=Path, default=TD.CHECKPOINT)
     p.add_argument("--models-dir", type=Path, default=MF.MODELS_DIR)
     p.add_argument("--name", default=MODEL_NAME, help="the manifest entry's name")
-    p.add_argument("--temperature", type=float, default=1.0,
-                   help="a latent network's latent scale when the service samples it")  # fmt: skip
-    p.add_argument("--correlation", type=float, default=0.0,
-                   help="a latent network's latent: correlation from one frame to the next")  # fmt: skip
     args = p.parse_args(argv)
     model, stats, ckpt = TD.load_checkpoint(args.checkpoint)
     from training.dance_alignment import load_table
@@ -265,17 +248,6 @@ def main(argv: list[str] | None = None) -> dict:
             },
             "fold": TD.fold_of(ckpt),
             "validation_takes": list(TD.held_out_takes(ckpt)),
-            **(
-                {
-                    "latent": {
-                        "dims": model.config.latent,
-                        "temperature": args.temperature,
-                        "correlation": args.correlation,
-                    }
-                }
-                if model.config.latent
-                else {}
-            ),
         },
         trained_at=ckpt.get("saved_at"),
         name=args.name,

@@ -76,12 +76,10 @@ WEIGHTS = {
     "match": 0.0,
     "diversity": 0.0,
     "free_skate": 0.0,
-    "kl": 0.0,
 }
 GUARDS = ("judge", "prior", "match", "diversity", "free_skate")
 """The loss terms that need the judge of real dances (``training.dance_genre``)."""
 SCHEDULE = Path(__file__).with_name("dance_schedule.json")
-POSTERIOR_HIDDEN = 256
 
 
 def split(seqs: list[Sequence], val_takes=VAL_TAKES) -> tuple[list[Sequence], list[Sequence]]:
@@ -117,7 +115,6 @@ class Config:
     genre_dim: int = 16
     dropout: float = 0.25
     film: bool = False  # the genre also scales and shifts each LSTM layer's output
-    latent: int = 0  # dimensions of a latent per frame that shifts the second cell's input
 
 
 class DanceNet(nn.Module):
@@ -152,27 +149,6 @@ class DanceNet(nn.Module):
             for layer in (self.film1, self.film2):
                 nn.init.zeros_(layer.weight)
                 nn.init.zeros_(layer.bias)
-        if cfg.latent:  # small: at latent 0 the network starts as the one it fine-tunes,
-            # and a latent moves it from the start (at zero the posterior learns nothing)
-            self.latent_in = nn.Linear(cfg.latent, cfg.hidden, bias=False)
-            nn.init.normal_(self.latent_in.weight, std=0.02)
-            self.posterior = nn.Sequential(  # (previous pose, next pose) -> mean, log var
-                nn.Linear(2 * DF.MOTION_CHANNELS, POSTERIOR_HIDDEN),
-                nn.ELU(),
-                nn.Linear(POSTERIOR_HIDDEN, POSTERIOR_HIDDEN),
-                nn.ELU(),
-                nn.Linear(POSTERIOR_HIDDEN, 2 * cfg.latent),
-            )
-            # the prior the service samples, given the first cell's state and the genre: an
-            # unconditioned one let a rumba's latents read as a cha-cha's. Zero last layer:
-            # it starts as the standard normal.
-            self.latent_prior = nn.Sequential(
-                nn.Linear(cfg.hidden + len(DF.GENRES), POSTERIOR_HIDDEN),
-                nn.ELU(),
-                nn.Linear(POSTERIOR_HIDDEN, 2 * cfg.latent),
-            )
-            nn.init.zeros_(self.latent_prior[-1].weight)
-            nn.init.zeros_(self.latent_prior[-1].bias)
 
     def encode_audio(self, audio: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         code = self.audio(audio)
@@ -182,43 +158,14 @@ class DanceNet(nn.Module):
         z = torch.zeros(batch, self.config.hidden)
         return z, z, z, z
 
-    def step(self, code, genre, prev, h1, c1, h2, c2, draw=None):
-        """One frame; a latent network's latent is ``draw`` (standard normal) taken through
-        the prior of this frame's state and genre."""
-        h1, c1 = self.first_cell(code, genre, prev, h1, c1)
-        latent = None
-        if draw is not None:
-            mean, log_var = self.prior_of(h1, genre)
-            latent = mean + (0.5 * log_var).exp() * draw
-        return self.second_cell(genre, h1, c1, h2, c2, latent)
-
-    def first_cell(self, code, genre, prev, h1, c1):
-        return self.cell1(torch.cat([code, self.genre(genre), prev], dim=-1), (h1, c1))
-
-    def second_cell(self, genre, h1, c1, h2, c2, latent=None):
-        between = self.drop(h1)
-        if latent is not None:
-            between = between + self.latent_in(latent)
+    def step(self, code, genre, prev, h1, c1, h2, c2):
+        x = torch.cat([code, self.genre(genre), prev], dim=-1)
+        h1, c1 = self.cell1(x, (h1, c1))
         if not self.config.film:
-            h2, c2 = self.cell2(between, (h2, c2))
+            h2, c2 = self.cell2(self.drop(h1), (h2, c2))
             return self.out(h2), h1, c1, h2, c2
-        h2, c2 = self.cell2(self._film(self.film1, genre, between), (h2, c2))
+        h2, c2 = self.cell2(self._film(self.film1, genre, self.drop(h1)), (h2, c2))
         return self.out(self._film(self.film2, genre, h2)), h1, c1, h2, c2
-
-    def prior_of(self, h1: torch.Tensor, genre: torch.Tensor):
-        mean, log_var = self.latent_prior(torch.cat([h1, genre], -1)).chunk(2, dim=-1)
-        return mean, log_var.clamp(-8.0, 4.0)
-
-    def posterior_latent(self, prev, target, prior_mean, prior_log_var):
-        """A sample of the latent that takes pose ``prev`` to ``target`` (both ``(B, M)``)
-        and its KL divergence from the prior ``(B, L)`` (nats): a motion VAE's encoder
-        (Ling et al. 2020) with a learned conditional prior."""
-        mean, log_var = self.posterior(torch.cat([prev, target], -1)).chunk(2, dim=-1)
-        log_var = log_var.clamp(-8.0, 4.0)
-        sample = mean + (0.5 * log_var).exp() * torch.randn_like(mean)
-        kl = 0.5 * (prior_log_var - log_var - 1
-                    + (log_var.exp() + (mean - prior_mean) ** 2) / prior_log_var.exp())  # fmt: skip
-        return sample, kl
 
     def _film(self, layer: nn.Linear, genre: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """``x * (1 + scale) + shift``, both linear in the genre; the weights are split (and
@@ -229,13 +176,7 @@ class DanceNet(nn.Module):
         return x * scale + nn.functional.linear(genre, layer.weight[n:], layer.bias[n:])
 
     def rollout(
-        self,
-        code,
-        genre,
-        motion,
-        gt_mask: torch.Tensor | None = None,
-        warm: int = 0,
-        latent: torch.Tensor | None = None,
+        self, code, genre, motion, gt_mask: torch.Tensor | None = None, warm: int = 0
     ) -> torch.Tensor:
         """Poses ``(B, T - 1, M)`` for frames 1.. of ``motion (B, T, M)``: frame 0 is given;
         each later frame is fed back its own prediction, or the ground truth where
@@ -245,10 +186,7 @@ class DanceNet(nn.Module):
         prev = motion[:, 0]
         outs = []
         for t in range(1, motion.shape[1]):
-            h1, c1 = self.first_cell(code[:, t], genre, prev, *state[:2])
-            pose, *state = self.second_cell(
-                genre, h1, c1, *state[2:], None if latent is None else latent[:, t]
-            )
+            pose, *state = self.step(code[:, t], genre, prev, *state)
             outs.append(pose)
             if t < warm:
                 prev = motion[:, t]
@@ -259,41 +197,6 @@ class DanceNet(nn.Module):
             else:
                 prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
         return torch.stack(outs, dim=1)
-
-    def encoded_rollout(
-        self,
-        code,
-        genre,
-        motion,
-        gt_mask,
-        warm: int,
-        from_prior: torch.Tensor,
-        free_bits: float = 0.0,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """As :meth:`rollout`, each frame's latent encoded from the pose fed in and the
-        ground truth next (from the prior where ``from_prior (B,)``: windows with no ground
-        truth, which add nothing to the KL); the poses and the KL term (per-dimension means
-        over the other windows' frames, each at least ``free_bits``, summed)."""
-        h1, c1, h2, c2 = self.init_state(motion.shape[0])
-        prev = motion[:, 0]
-        encoded = (~from_prior).float()[:, None]
-        outs, kl = [], 0.0
-        for t in range(1, motion.shape[1]):
-            h1, c1 = self.first_cell(code[:, t], genre, prev, h1, c1)
-            prior_mean, prior_log_var = self.prior_of(h1, genre)
-            latent, kl_t = self.posterior_latent(prev, motion[:, t], prior_mean, prior_log_var)
-            drawn = prior_mean + (0.5 * prior_log_var).exp() * torch.randn_like(latent)
-            latent = torch.where(from_prior[:, None], drawn, latent)
-            kl = kl + (kl_t * encoded).sum(0) / encoded.sum().clamp_min(1) / (motion.shape[1] - 1)
-            pose, h1, c1, h2, c2 = self.second_cell(genre, h1, c1, h2, c2, latent)
-            outs.append(pose)
-            if t < warm:
-                prev = motion[:, t]
-            elif gt_mask.dim() == 1:
-                prev = motion[:, t] if bool(gt_mask[t]) else pose
-            else:
-                prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
-        return torch.stack(outs, dim=1), kl.clamp_min(free_bits).sum()
 
 
 def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.Tensor:
@@ -319,12 +222,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="start from this checkpoint's weights, statistics and start poses "
                    "(a new schedule from step 0; layers it lacks start at zero)")  # fmt: skip
     p.add_argument("--film", action="store_true", help="genre FiLM on both LSTM layers")
-    p.add_argument("--latent", type=int, default=0,
-                   help="dimensions of a per-frame latent (a motion VAE; 0: none)")  # fmt: skip
-    p.add_argument("--free-bits", type=float, default=0.0,
-                   help="nats per latent dimension the KL term leaves free")  # fmt: skip
-    p.add_argument("--latent-only", action="store_true",
-                   help="train only the latent's encoder and input")  # fmt: skip
     p.add_argument("--stage", default=None,
                    help="the schedule stage this run is (recorded once its steps are done)")  # fmt: skip
     p.add_argument("--swap-share", type=float, default=0.0,
@@ -407,10 +304,10 @@ def init_from(path: Path, config: Config) -> tuple[DanceNet, DF.DanceStats, dict
     says (layers the checkpoint lacks keep their zero start); the checkpoint."""
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     config = dataclasses.replace(config, **{k: v for k, v in ckpt["net_config"].items()
-                                            if k not in ("film", "latent")})  # fmt: skip
+                                            if k != "film"})  # fmt: skip
     model = DanceNet(config)
     missing, unexpected = model.load_state_dict(ckpt["model"], strict=False)
-    if unexpected or any(not k.startswith(("film", "latent_", "posterior")) for k in missing):
+    if unexpected or any(not k.startswith("film") for k in missing):
         raise ValueError(f"{path} does not fit: missing {missing}, unexpected {unexpected}")
     model.train()
     return model, DF.DanceStats.from_arrays(ckpt["stats"]), ckpt
@@ -435,13 +332,7 @@ def train_step(
     mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng)
     if swapped.any():  # a swapped window has no ground truth to feed back
         mask = mask[None].expand(len(genre), -1) & ~swapped[:, None]
-    kl = torch.zeros(())
-    if model.config.latent:
-        pred, kl = model.encoded_rollout(
-            code, cond_vec, motion, mask, args.warm, swapped, args.free_bits
-        )
-    else:
-        pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
+    pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
     if swapped.all():
         parts = {k: torch.zeros(()) for k in ("feat", "pos", "effort", "skate")}
     else:
@@ -452,7 +343,6 @@ def train_step(
         parts["genre"] = torch.zeros(())
     for k in GUARDS:
         parts[k] = torch.zeros(())
-    parts["kl"] = kl
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
         parts["judge"] = judge.judged(judge(frames), asked[music])
@@ -520,7 +410,7 @@ def train(args: argparse.Namespace) -> None:
         poses, step, best = ckpt["start_poses"], int(ckpt["step"]), ckpt.get("best_val")
         stages = list(ckpt.get("stages", []))
     elif args.init is not None:
-        model, stats, start = init_from(args.init, Config(film=args.film, latent=args.latent))
+        model, stats, start = init_from(args.init, Config(film=args.film))
         require_fold(start, args.fold, args.init)
         poses, stages, step, best, ckpt = (
             start["start_poses"],
@@ -533,16 +423,14 @@ def train(args: argparse.Namespace) -> None:
         stats = DF.DanceStats.fit([s.audio for s in train_seqs if s.has_music],
                                   [s.motion for s in train_seqs])  # fmt: skip
         model, step, best, ckpt = (
-            DanceNet(Config(hidden=args.hidden, film=args.film, latent=args.latent)),
+            DanceNet(Config(hidden=args.hidden, film=args.film)),
             0,
             None,
             None,
         )
         poses, stages = start_poses(train_seqs), []
     losses = Losses(stats)
-    trained = [p for n, p in model.named_parameters()
-               if not args.latent_only or n.startswith(("latent_", "posterior"))]  # fmt: skip
-    optimiser = torch.optim.AdamW(trained, lr=args.lr, weight_decay=1e-4)
+    optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     if ckpt is not None and optimiser_path(args.checkpoint).exists():
         optimiser.load_state_dict(torch.load(optimiser_path(args.checkpoint), weights_only=False))
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
@@ -630,10 +518,9 @@ def generate(
     g = torch.from_numpy(np.asarray(genre, np.float32))[None]
     prev = torch.from_numpy(stats.normalize_motion(start))[None]
     state = model.init_state(1)
-    draw = (torch.zeros(1, model.config.latent),) if model.config.latent else ()  # prior mean
     out = [prev]
     for t in range(1, len(audio_raw)):
-        prev, *state = model.step(code[:, t], g, prev, *state, *draw)
+        prev, *state = model.step(code[:, t], g, prev, *state)
         out.append(prev)
     return stats.denormalize_motion(torch.cat(out).numpy())
 

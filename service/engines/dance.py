@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import signal as scipy_signal
 
 from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
@@ -105,9 +104,6 @@ class DanceEngine(Engine):
         self.stats = DF.DanceStats.from_arrays(arrays)
         self.start_poses = np.asarray(arrays["start_poses"], np.float32)
         self.hidden = int(self.entry.extra["hidden"])
-        self.latent = self.entry.extra.get("latent")  # a network with a latent: its sampling
-        if self.latent and not 0 <= float(self.latent["correlation"]) < 1:
-            raise ValueError("the bundle's latent correlation is outside [0, 1)")
         if list(self.entry.extra.get("genres", DF.GENRES)) != list(DF.GENRES):
             raise ValueError("the bundle's genres differ from motion.dance_features.GENRES")
 
@@ -141,28 +137,14 @@ class DanceEngine(Engine):
         prev = start[None].astype(np.float32)
         noise = (NOISE * rng.standard_normal((frames, DF.MOTION_CHANNELS))).astype(np.float32)
         noise[:, DF.CONTACTS] = 0.0
-        draws = self.draw_series(frames, rng) if self.latent else None
         session = self.sessions["step"]
         for t in range(1, frames):
             feeds["code"] = code[t : t + 1]
             feeds["prev"] = prev + noise[t]
-            if draws is not None:
-                feeds["draw"] = draws[t : t + 1]
             pose, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = session.run(None, feeds)
             out[t] = pose[0]
             prev = pose
         return out
-
-    def draw_series(self, frames: int, rng: np.random.Generator) -> np.ndarray:
-        """``(F, L)``: the step graph's standard normal draws (its prior makes them the
-        latent), wandering as an AR(1) series of the bundle's correlation, times the bundle's
-        temperature."""
-        rho = float(self.latent["correlation"])
-        scale = math.sqrt(1 - rho * rho)
-        white = rng.standard_normal((frames, int(self.latent["dims"])))
-        white[0] /= scale  # the series starts at its stationary variance, 1
-        series = scipy_signal.lfilter([scale], [1.0, -rho], white, axis=0)
-        return (float(self.latent["temperature"]) * series).astype(np.float32)
 
     # --- the three steps ---------------------------------------------------------------------
 
