@@ -94,8 +94,11 @@ def stack():
     stack = Stack()
     try:
         stack.run("up", "-d", "--no-build", timeout=600)
-        wait_ready(stack.url, timeout=240)
+        # each replica ready before anything goes through nginx: a replica still warming
+        # answers 503, three of which rest it in nginx for fail_timeout (10 s), and the
+        # tests would then see one replica take every request
         stack.wait_every_replica_ready()
+        wait_ready(stack.url, timeout=240)
         yield stack
     except BaseException:
         print(stack.run("logs", "--tail", "40", timeout=60))
