@@ -94,6 +94,7 @@ def record_dance(report: dict, models_dir: Path) -> None:
         "foot_sliding_cm_s": report["foot_sliding_cm_s"],
         "foot_contact_score": report["foot_contact_score"],
         "feature_distances_test_half": report["feature_distances"]["test"],
+        "speed_against_genre": report["speed_against_genre"],
         "genre_accuracy": {
             **{
                 k: v
@@ -145,6 +146,7 @@ def fold_figures(folds: dict) -> dict:
         "foot_contact_score": pooled["foot_contact_score"],
         "songs_on_the_beat": pooled["songs_on_the_beat"],
         "whole_songs": pooled["whole_songs"],
+        "speed_against_genre": pooled["speed_against_genre"],
         "feature_distance_ratios_test_half": {
             genre: {kind: row[kind]["ratio"] for kind in ("kinetic", "geometric")}
             for genre, row in pooled["feature_distances"]["test"].items()

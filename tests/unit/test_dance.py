@@ -228,6 +228,12 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
         assert sum(sum(r.values()) for r in half["confusion"].values()) == 8
         hits = sum(half["confusion"][g][g] for g in half["confusion"])
         assert half["all"] == round(hits / 8, 4)
+    speeds = report["speed_against_genre"]  # every generated dance, against its genre asked
+    assert speeds["n"] == 8 and 0 <= speeds["under"] <= 8
+    assert (
+        set(speeds["real_cm_s"]) >= set(DF.MUSIC_GENRES) and min(speeds["real_cm_s"].values()) > 0
+    )
+    assert 0.0 < speeds["slowest"]["share"] and speeds["slowest"]["song"] == held[0][0]
     ten = report["ten_minutes"]
     assert [r["seed"] for r in ten["per_seed"]] == [0, 1]
     assert ten["frames"] >= 60 * 30 - 1  # a minute of motion for a minute of music
@@ -245,6 +251,23 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
         recorded["held_out_songs"]["genre_accuracy"]["test_half"]["all"]
         == (genre["by_half"]["test"]["all"])
     )
+
+
+def test_speed_against_genre_finds_a_dance_that_barely_moves():
+    """A dance at a quarter of its genre's real speed has no stall against its own median;
+    against the genre it is the slowest, and the one under half."""
+    from training import eval_dance as ED
+
+    real = {"rumba": 52.0, "waltz": 40.0}
+    shares = [{"song": "R", "asked": "rumba", "seed": 0, "share": 13.0 / 52.0},
+              {"song": "R", "asked": "waltz", "seed": 0, "share": 36.0 / 40.0},
+              {"song": "W", "asked": "rumba", "seed": 1, "share": 0.7}]  # fmt: skip
+    one = ED.speed_against_genre(shares, real)
+    assert one["slowest"] == {"song": "R", "asked": "rumba", "seed": 0, "share": 0.25}
+    assert (one["under"], one["n"]) == (1, 3) and one["real_cm_s"] == real
+    other = ED.speed_against_genre([{**shares[2], "share": 0.4}], {"rumba": 50.0})
+    pooled = ED.pooled_speed_against_genre([one, other])
+    assert (pooled["under"], pooled["n"], pooled["slowest"]["share"]) == (2, 4, 0.25)
 
 
 def test_stalls_are_slow_windows_of_music():
@@ -320,7 +343,9 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     kept = [h for h in held if h[0] in songs]
     spare = [(h[1], h[2]) for h in held if h[0] not in songs]
     monkeypatch.setattr(
-        ED, "held_out_songs", lambda takes: ([h for h in kept if h[0] in takes], train + spare)
+        ED,
+        "held_out_songs",
+        lambda takes, audio=True: ([h for h in kept if h[0] in takes], train + spare),
     )
 
     def fold_copy(fold: int, takes: list[str]):
@@ -354,6 +379,12 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     assert [w["songs"] for w in whole] == [1, 1] and pooled["whole_songs"]["songs"] == 2
     assert pooled["whole_songs"]["stalls"] == sum(w["stalls"] for w in whole)
     assert pooled["whole_songs"]["slowest_5s_share"] == min(w["slowest_5s_share"] for w in whole)
+    speeds = [r["speed_against_genre"] for r in rows]
+    assert [s["n"] for s in speeds] == [4, 4] and pooled["speed_against_genre"]["n"] == 8
+    assert pooled["speed_against_genre"]["under"] == sum(s["under"] for s in speeds)
+    assert pooled["speed_against_genre"]["slowest"]["share"] == min(
+        s["slowest"]["share"] for s in speeds
+    )
     text = ED.markdown(report)
     assert f"| 1 | {rows[1]['model']} | {songs[1]} |" in text
     assert "| pooled | every fold |" in text

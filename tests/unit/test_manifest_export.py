@@ -93,6 +93,7 @@ def test_dance_evaluation_records_its_summary(models):
         "foot_sliding_cm_s": {"real": 9.0, "generated": 6.0},
         "foot_contact_score": {"real": 0.9, "generated": 0.8},
         "feature_distances": {"test": {"kinetic": 1.5}, "dev": {"kinetic": 9.9}},
+        "speed_against_genre": {"slowest": {"song": "a", "share": 0.4}, "under": 1, "n": 8},
         "genre_accuracy": {"generated": 0.25, "real_held_out": 1.0, "chance": 0.25,
                            "confusion": [[1]],
                            "by_half": {"dev": {"generated": 0.5, "confusion": [[1]]},
@@ -122,6 +123,7 @@ def test_dance_evaluation_records_its_summary(models):
         "test_half": {"generated": 0.75},
     }
     assert figures["foot_contact_score"]["generated"] == 0.8
+    assert figures["speed_against_genre"]["under"] == 1
     assert "cores; BLAS kernels:" in figures["machine"]
     with pytest.raises(ValueError, match="not '2'"):
         EV.record_dance(report | {"model_version": "2"}, models)
