@@ -133,8 +133,8 @@ def speed_in_place(motion: Motion) -> float:
     much the body dances, whatever it travels (the one tango dance glides across the floor
     three times as fast as any other genre's dancers)."""
     gpos = K.global_positions(motion)
-    gpos = gpos - gpos[:, DF.HIPS : DF.HIPS + 1] * np.array([1.0, 0.0, 1.0])
-    return float(BW.joint_speed(gpos, motion.fps).mean())
+    floor = gpos[:, DF.HIPS : DF.HIPS + 1] * np.array([1.0, 0.0, 1.0])
+    return float(BW.joint_speed((gpos - floor)[:, DM.BODY], motion.fps).mean())
 
 
 def genre_speeds(dances: list[tuple[str, Motion]]) -> dict[str, float]:
