@@ -144,6 +144,7 @@ def fold_figures(folds: dict) -> dict:
         "genre_test_half": {k: v for k, v in pooled["genre"]["test"].items() if k != "confusion"},
         "foot_sliding_cm_s": pooled["foot_sliding_cm_s"],
         "foot_contact_score": pooled["foot_contact_score"],
+        "legs_jerk_m_s3_test_half": pooled["legs_jerk_m_s3"]["test"],
         "songs_on_the_beat": pooled["songs_on_the_beat"],
         "whole_songs": pooled["whole_songs"],
         "speed_against_genre": pooled["speed_against_genre"],

@@ -33,7 +33,8 @@ a beat). Parts:
   of the four genres requested;
 - **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
   foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
-  of the real held-out dances;
+  of the real held-out dances, and by half the legs' jerk (``training.judges.jerk``: how
+  much the feet's clean-up makes the legs jitter);
 - **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++
   kinetic and geometric feature distances of the dances generated for the held-out songs to their real dances,
   beside the real dances of the genre's other songs to the same, per genre, and diversity;
@@ -310,7 +311,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
     and the generated dances' to the beats at the song's danced tempo too), genre
     recognition of every requested genre, foot sliding and contacts, feature distances."""
-    from training.judges import ClipClassifier
+    from training.judges import LEGS, ClipClassifier, jerk
 
     held, train = held_out_songs(takes)
     genre_clf = ClipClassifier([genre_features(m) for _, m in train], [g for g, _ in train])
@@ -321,7 +322,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     rows = {k: [] for k in ("real", "generated", "generated_no_warp", "generated_reference")}
     sliding = {"real": [], "generated": []}
     contact = {"real": [], "generated": []}
-    by_half = {h: {"sliding": {"real": [], "generated": []}, "contact": {"real": [], "generated": []}}
+    by_half = {h: {m: {"real": [], "generated": []} for m in ("sliding", "contact", "legs_jerk")}
                for h in DM.HALVES}  # fmt: skip
 
     def feet(kind: str, motion: Motion) -> None:
@@ -332,6 +333,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
                            strict=True):  # fmt: skip
             by_half[h]["sliding"][kind].append(CT.canonical_foot_sliding(part))
             by_half[h]["contact"][kind].append(DM.physical_foot_contact(part))
+            by_half[h]["legs_jerk"][kind].append(jerk(part, LEGS))
 
     generated_dances: dict[str, list[Motion]] = {}
     real_speed_of, speed_shares = genre_speeds(train), []
@@ -410,7 +412,12 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
         },
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
-        "_pooling": {"generated": generated_dances, "sliding": sliding, "contact": contact},
+        "_pooling": {
+            "generated": generated_dances,
+            "sliding": sliding,
+            "contact": contact,
+            "legs_jerk": {h: m["legs_jerk"] for h, m in by_half.items()},
+        },
     }
 
 
@@ -488,12 +495,15 @@ def by_fold(folds: list[tuple]) -> dict:
     generated = {n: d for _, pooling, _ in folds for n, d in pooling["generated"].items()}
     feet = {m: {k: round(float(np.mean([x for _, p, _ in folds for x in p[m][k]])), 3)
                 for k in ("real", "generated")} for m in ("sliding", "contact")}  # fmt: skip
+    legs_jerk = {h: {k: round(float(np.mean([x for _, p, _ in folds for x in p["legs_jerk"][h][k]])), 1)
+                     for k in ("real", "generated")} for h in DM.HALVES}  # fmt: skip
     pooled = {
         "songs": every,
         "genre": {h: genre_accuracy(_summed([p["genre_accuracy"]["by_half"][h]["confusion"]
                                              for _, _, p in folds])) for h in DM.HALVES},
         "foot_sliding_cm_s": feet["sliding"],
         "foot_contact_score": feet["contact"],
+        "legs_jerk_m_s3": legs_jerk,
         "songs_on_the_beat": sum(r["songs_on_the_beat"] for r in rows),
         "whole_songs": whole_song_figures({n: w for _, p, _ in folds
                                            for n, w in p["whole_songs"].items()}),
@@ -612,7 +622,8 @@ def _feet_by_half(halves: dict | None) -> list[str]:
         "By half (each half's own ground level), real / generated: "
         + "; ".join(
             f"{h}: sliding {v['sliding']['real']:.2f} / {v['sliding']['generated']:.2f} cm/s, "
-            f"contact score {v['contact']['real']:.3f} / {v['contact']['generated']:.3f}"
+            f"contact score {v['contact']['real']:.3f} / {v['contact']['generated']:.3f}, "
+            f"legs' jerk {v['legs_jerk']['real']:.0f} / {v['legs_jerk']['generated']:.0f} m/s³"
             for h, v in halves.items()
         )
         + "."
@@ -660,7 +671,10 @@ def _folds_lines(folds: dict | None) -> list[str]:
             f"{_ratios(fd, 'test', 'kinetic')} | {_ratios(fd, 'dev', 'geometric')} | "
             f"{_ratios(fd, 'test', 'geometric')} |"
         )
-    return [*lines, "", "Pooled:", "", *DM.distance_table(pooled["feature_distances"])]
+    jerks = "; ".join(f"{h} half {v['generated']:.0f} / {v['real']:.0f}"
+                      for h, v in pooled["legs_jerk_m_s3"].items())  # fmt: skip
+    return [*lines, "", f"Pooled legs' jerk (m/s³), generated / real: {jerks}.", "",
+            "Pooled:", "", *DM.distance_table(pooled["feature_distances"])]  # fmt: skip
 
 
 def markdown(report: dict) -> str:

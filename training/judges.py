@@ -63,14 +63,20 @@ def skating(motion: Motion) -> float:
     return CT.canonical_foot_sliding(motion)
 
 
-def jerk(motion: Motion) -> float:
+LEGS = tuple(C.INDEX[f"{part}_{side}"] for side in "LR"
+             for part in ("UpperLeg", "LowerLeg", "Foot", "Toes"))  # fmt: skip
+
+
+def jerk(motion: Motion, joints: tuple[int, ...] | None = None) -> float:
     """Mean joint jerk in m/s^3 of a canonical motion: the third difference of each body
-    joint's position over the root on the floor, in the body's facing frame (the features'
-    3D style input, the hips' height included): how the body moves, not where it travels
-    (the content's)."""
+    joint's position (of ``joints`` only, canonical indices, when given) over the root on
+    the floor, in the body's facing frame (the features' 3D style input, the hips' height
+    included): how the body moves, not where it travels (the content's)."""
     if motion.num_frames < 4:
         return 0.0
     pos = Fe.style3d_features(motion).reshape(motion.num_frames, -1, 3).astype(np.float64)
+    if joints is not None:
+        pos = pos[:, [int(np.flatnonzero(Fe.BODY == j)[0]) for j in joints]]
     third = np.diff(pos * (Fe.LEG / 100.0), n=3, axis=0) * motion.fps**3
     return float(np.linalg.norm(third, axis=-1).mean())
 

@@ -385,7 +385,10 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     assert pooled["speed_against_genre"]["slowest"]["share"] == min(
         s["slowest"]["share"] for s in speeds
     )
+    jerks = {h: pooled["legs_jerk_m_s3"][h] for h in ("dev", "test")}
+    assert all(v["real"] > 0 and v["generated"] > 0 for v in jerks.values())
     text = ED.markdown(report)
+    assert f"dev half {jerks['dev']['generated']:.0f} / {jerks['dev']['real']:.0f}" in text
     assert f"| 1 | {rows[1]['model']} | {songs[1]} |" in text
     assert "| pooled | every fold |" in text
     from model_export.evaluations import fold_figures
@@ -394,6 +397,7 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     assert [f["songs"] for f in recorded["folds"]] == [[songs[0]], [songs[1]]]
     assert recorded["genre_test_half"]["all"] == pooled["genre"]["test"]["all"]
     assert recorded["whole_songs"] == pooled["whole_songs"]
+    assert recorded["legs_jerk_m_s3_test_half"] == jerks["test"]
     ratios = recorded["feature_distance_ratios_test_half"]["cha-cha"]
     assert ratios["kinetic"] == pooled["feature_distances"]["test"]["cha-cha"]["kinetic"]["ratio"]
     fold_copy(1, [songs[0]])  # both folds hold out the same song

@@ -100,3 +100,28 @@ def test_jerk_sees_jitter_and_tempo_not_where_the_body_stands():
     moved = motion.lpos.copy()
     moved[:, 0] += [150.0, 20.0, -300.0]
     assert np.isclose(ES.jerk(motion.replace(lpos=moved)), calm, rtol=1e-6)
+
+
+def test_the_legs_jerk_sees_the_legs_only():
+    """A tremor of the arms shakes the body's jerk and leaves the legs' as it was; one of the
+    knees raises the legs'."""
+    from motion import rotations as rot
+
+    motion = retarget.to_canonical(bvh.load(FIXTURE))
+    legs = ES.jerk(motion, ES.LEGS)
+    assert {C.JOINTS[j] for j in ES.LEGS} == {
+        f"{p}_{s}" for s in "LR" for p in ("UpperLeg", "LowerLeg", "Foot", "Toes")
+    }
+
+    def shaken(names: list[str]):
+        tremor = np.zeros(motion.lrot.shape[:2] + (3,))
+        idx = [C.INDEX[n] for n in names]
+        tremor[:, idx] = np.random.default_rng(0).normal(
+            0.0, 0.02, (motion.num_frames, len(idx), 3)
+        )
+        return motion.replace(lrot=rot.mul(motion.lrot, rot.from_rotvec(tremor)))
+
+    arms = shaken(["UpperArm_L", "UpperArm_R", "LowerArm_L", "LowerArm_R"])
+    assert ES.jerk(arms) > 2.0 * ES.jerk(motion)
+    assert np.isclose(ES.jerk(arms, ES.LEGS), legs, rtol=1e-6)
+    assert ES.jerk(shaken(["LowerLeg_L", "LowerLeg_R"]), ES.LEGS) > 3.0 * legs
