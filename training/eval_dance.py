@@ -34,7 +34,7 @@ a beat). Parts:
 - **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
   foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
   of the real held-out dances, and by half the legs' jerk (``training.judges.jerk``: how
-  much the feet's clean-up makes the legs jitter);
+  much the feet's clean-up makes the legs jitter) of the dances in their song's genre;
 - **distance to real dance** (``training.dance_metrics.feature_distances``): the AIST++
   kinetic and geometric feature distances of the dances generated for the held-out songs to their real dances,
   beside the real dances of the genre's other songs to the same, per genre, and diversity;
@@ -307,6 +307,12 @@ def genre_features(motion: Motion) -> np.ndarray:
     return window_features(floor_rooted(motion))
 
 
+def halves_of(motion: Motion) -> list[tuple[str, Motion]]:
+    """The development and test halves of a held-out dance, by name."""
+    middle = motion.num_frames // 2
+    return list(zip(DM.HALVES, (motion.slice(0, middle), motion.slice(middle, None)), strict=True))
+
+
 def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
     and the generated dances' to the beats at the song's danced tempo too), genre
@@ -328,11 +334,12 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     def feet(kind: str, motion: Motion) -> None:
         sliding[kind].append(CT.canonical_foot_sliding(motion))
         contact[kind].append(DM.physical_foot_contact(motion))
-        middle = motion.num_frames // 2
-        for h, part in zip(DM.HALVES, (motion.slice(0, middle), motion.slice(middle, None)),
-                           strict=True):  # fmt: skip
+        for h, part in halves_of(motion):
             by_half[h]["sliding"][kind].append(CT.canonical_foot_sliding(part))
             by_half[h]["contact"][kind].append(DM.physical_foot_contact(part))
+
+    def legs_jerk(kind: str, motion: Motion) -> None:  # the song's own genre only
+        for h, part in halves_of(motion):
             by_half[h]["legs_jerk"][kind].append(jerk(part, LEGS))
 
     generated_dances: dict[str, list[Motion]] = {}
@@ -347,6 +354,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         feet("real", real)
+        legs_jerk("real", real)
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
@@ -366,6 +374,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
                 if asked != genre:
                     continue
                 generated_dances.setdefault(name, []).append(out)
+                legs_jerk("generated", out)
                 s, c = BW.alignment(out, beats)
                 rows["generated"].append((s, c))
                 song.setdefault("generated", []).append({"bas": round(s, 4), "chance": round(c, 4)})
