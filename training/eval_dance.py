@@ -1,6 +1,6 @@
 """Evaluation of the shipped dance model (jacob2019 made to work).
 
-    python -m training.eval_dance [--seeds 3] [--json PATH] [--quick] [--fold-models DIR]
+    python -m training.eval_dance [--seeds 12] [--json PATH] [--quick] [--fold-models DIR]
 
 (``python -m model_export.evaluations PATH`` then records the report in the model's
 manifest entry.)
@@ -75,6 +75,9 @@ TEN_MINUTES = 600.0
 BLOCK = 30.0  # seconds per energy block
 PASS_SCORE, PASS_RATIO = 0.2, 1.5  # the issue's bar on every generated pattern and tempo
 SLOW_FOR_THE_GENRE = 0.5  # a dance under half its genre's real speed has all but stopped
+SEEDS = 12
+"""Dance seeds per held-out song and genre asked: with 3, the mean of the six development-half
+distance ratios moved from 1.40 to 1.00 on the seed alone (docs/dance_alignment.md)."""
 
 
 def on_the_beat(score: float, chance: float) -> bool:
@@ -561,7 +564,7 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
 
 
 def evaluate(
-    seeds: int = 3,
+    seeds: int = SEEDS,
     log=print,
     *,
     test_songs=None,
@@ -809,7 +812,9 @@ def _speed_against_genre_line(speeds: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument(
+        "--seeds", type=int, default=SEEDS, help="dance seeds per held-out song and genre"
+    )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(
         "--quick",
