@@ -319,7 +319,8 @@ def halves_of(motion: Motion) -> list[tuple[str, Motion]]:
 def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
     and the generated dances' to the beats at the song's danced tempo too), genre
-    recognition of every requested genre, foot sliding and contacts, feature distances."""
+    recognition of every requested genre, foot sliding and contacts, the legs' jerk,
+    feature distances."""
     from training.judges import LEGS, ClipClassifier, jerk
 
     held, train = held_out_songs(takes)
