@@ -242,9 +242,11 @@ class Normaliser:
         return (np.asarray(features, dtype=np.float64) - self.mean) / self.std
 
 
-def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Frechet distance between Gaussians fitted to the rows of ``a`` and ``b``:
-    ``|mu_a - mu_b|^2 + tr(S_a + S_b - 2 (S_a S_b)^(1/2))`` (each set needs two rows)."""
+def frechet_terms(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """The two parts of the Frechet distance between Gaussians fitted to the rows of ``a``
+    and ``b``: where they lie, ``|mu_a - mu_b|^2``, and how they spread,
+    ``tr(S_a + S_b - 2 (S_a S_b)^(1/2))`` (each set needs two rows). A generator whose pieces
+    all look alike has a large spread part however well its mean matches."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if len(a) < 2 or len(b) < 2:
         raise ValueError("a Frechet distance needs at least two feature vectors a set")
@@ -257,7 +259,14 @@ def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
             offset = np.eye(len(sa)) * 1e-6
             covmean = linalg.sqrtm((sa + offset) @ (sb + offset))
     covmean = np.real(covmean)
-    return float(max(diff @ diff + np.trace(sa) + np.trace(sb) - 2.0 * np.trace(covmean), 0.0))
+    spread = np.trace(sa) + np.trace(sb) - 2.0 * np.trace(covmean)
+    return float(diff @ diff), float(max(spread, 0.0))
+
+
+def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Frechet distance between Gaussians fitted to the rows of ``a`` and ``b``:
+    ``|mu_a - mu_b|^2 + tr(S_a + S_b - 2 (S_a S_b)^(1/2))`` (:func:`frechet_terms`)."""
+    return float(sum(frechet_terms(a, b)))
 
 
 def diversity(features: np.ndarray) -> float:
@@ -301,19 +310,27 @@ def _pfc(motion: Motion) -> float:
     return float((slowest[0] * slowest[1] * accel / peak).mean() * 10_000)
 
 
-def matched_frechet(
+def matched_frechet_terms(
     candidate: np.ndarray, reference: np.ndarray, size: int, draws: int = 20, seed: int = 0
-) -> float:
-    """:func:`frechet_distance` of ``size`` rows of ``candidate`` to ``reference``, averaged
+) -> tuple[float, float]:
+    """:func:`frechet_terms` of ``size`` rows of ``candidate`` to ``reference``, averaged
     over ``draws`` random choices of the rows (one when ``candidate`` has ``size``): the
     distance of a few samples grows as their number falls, so two candidates are compared
     at one size."""
     candidate = np.asarray(candidate, dtype=np.float64)
     if size >= len(candidate):
-        return frechet_distance(candidate, reference)
+        return frechet_terms(candidate, reference)
     rng = np.random.default_rng(seed)
     picks = [rng.choice(len(candidate), size, replace=False) for _ in range(draws)]
-    return float(np.mean([frechet_distance(candidate[p], reference) for p in picks]))
+    terms = np.array([frechet_terms(candidate[p], reference) for p in picks])
+    return float(terms[:, 0].mean()), float(terms[:, 1].mean())
+
+
+def matched_frechet(
+    candidate: np.ndarray, reference: np.ndarray, size: int, draws: int = 20, seed: int = 0
+) -> float:
+    """The Frechet distance of :func:`matched_frechet_terms`."""
+    return float(sum(matched_frechet_terms(candidate, reference, size, draws, seed)))
 
 
 SEGMENT_SECONDS = 5.0  # the pieces whose features the distances compare
@@ -378,10 +395,12 @@ def _distance_row(feats: dict[str, dict[str, np.ndarray]], normalise: dict) -> d
     for kind in FEATURES:
         real, gen, other = (normalise[kind](feats[k][kind])
                             for k in ("real", "generated", "other_songs"))  # fmt: skip
-        to_generated = matched_frechet(gen, real, size)
+        generated_terms = matched_frechet_terms(gen, real, size)
+        to_generated = sum(generated_terms)
         to_other = matched_frechet(other, real, size)
         row[kind] = {
             "generated_to_real": round(to_generated, 2),
+            "generated_spread_share": round(generated_terms[1] / max(to_generated, 1e-9), 3),
             "other_songs_to_real": round(to_other, 2),
             "ratio": round(to_generated / max(to_other, 1e-9), 2),
             "diversity_generated": round(diversity(gen), 2),
@@ -425,14 +444,19 @@ def distance_table(distances: dict) -> list[str]:
                 f"{k['diversity_generated']:.1f} / {k['diversity_real']:.1f} | "
                 f"{g['diversity_generated']:.1f} / {g['diversity_real']:.1f} |"
             )
-    lines += ["", "Largest gaps (a feature's term of the distance's mean part, normalised; "
-              "generated / real means of the raw feature, m²/s², m/s² or share of frames):"]  # fmt: skip
+    lines += ["", "The generated dances' distance by its parts: the spread's share (how differently "
+              "the pieces vary; the rest is where they lie on average), then the largest gaps "
+              "(a feature's term of the location part, normalised; generated / real means of "
+              "the raw feature, m²/s², m/s² or share of frames):"]  # fmt: skip
     for half in HALVES:
         for genre, row in distances[half].items():
             for kind, label in (("kinetic", "FID_k"), ("geometric", "FID_g")):
                 gaps = row[kind]["largest_gaps"]
+                spread = row[kind].get("generated_spread_share")
                 lines.append(
-                    f"- {half} {genre} {label}: "
+                    f"- {half} {genre} {label}"
+                    + ("" if spread is None else f" (spread {spread:.0%})")
+                    + ": "
                     + "; ".join(
                         f"{x['feature']} {x['term']:.1f} ({x['generated']:.3g} / {x['real']:.3g})"
                         for x in gaps

@@ -77,6 +77,20 @@ def test_frechet_distance_of_gaussians():
         DM.frechet_distance(a[:1], b)
 
 
+def test_frechet_terms_split_location_from_spread():
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(4000, 3))
+    # N(0, 1) against N(2, 3^2) per dimension: 2^2 where they lie, (3 - 1)^2 how they spread
+    location, spread = DM.frechet_terms(a, 2.0 + 3.0 * rng.normal(size=(4000, 3)))
+    assert location == pytest.approx(12.0, rel=0.05) and spread == pytest.approx(12.0, rel=0.05)
+    # pieces that all look alike: the same mean, half the spread -> (1 - 0.5)^2 per dimension
+    location, spread = DM.frechet_terms(a, 0.5 * rng.normal(size=(4000, 3)))
+    assert location < 0.01 and spread == pytest.approx(0.75, rel=0.1)
+    size, draws = 50, 30
+    terms = DM.matched_frechet_terms(a, a[:200], size, draws=draws)
+    assert sum(terms) == pytest.approx(DM.matched_frechet(a, a[:200], size, draws=draws))
+
+
 def test_matched_frechet_compares_at_one_size():
     rng = np.random.default_rng(1)
     reference, many = rng.normal(size=(10, 2)), rng.normal(size=(400, 2))
@@ -157,4 +171,7 @@ def test_a_distance_row_reports_its_largest_gaps():
     assert all(g["feature"].endswith("horizontal speed²") for g in gaps)
     # gliding at 1 m/s adds 1 m²/s² to every joint's mean squared horizontal speed
     assert all(g["generated"] - g["real"] == pytest.approx(1.0, abs=0.05) for g in gaps)
-    assert any("horizontal speed²" in line for line in DM.distance_table(report))
+    # the same moves shifted: the distance is where the pieces lie, not how they vary
+    assert report["dev"]["waltz"]["kinetic"]["generated_spread_share"] < 0.05
+    table = DM.distance_table(report)
+    assert any("horizontal speed²" in line and "(spread 0%)" in line for line in table)
