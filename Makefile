@@ -139,7 +139,8 @@ show-styles: $(VENV)/.dev
 # runs/eval/models-fold1 and judges on its own songs beside the shipped model, then pools.
 DANCE_ARGS ?=
 DANCE_FOLD1 := checkpoints/dance-fold1.pt
-.PHONY: dance-alignment dance-tempo train-dance train-dance-fold1 export-dance eval-dance show-dance
+.PHONY: dance-alignment dance-tempo train-dance train-dance-fold1 export-dance eval-dance \
+	judge-dance show-dance
 dance-alignment: $(VENV)/.dev
 	$(PY) -m training.dance_alignment --write
 
@@ -164,6 +165,18 @@ eval-dance: $(VENV)/.dev
 		--name dance-dwm-fold1
 	$(PY) -m training.eval_dance --json runs/eval/dance.json --fold-models runs/eval/models-fold1
 	$(PY) -m model_export.evaluations runs/eval/dance.json
+
+# A trial judged as the rules in docs/dance_alignment.md judge one, without touching models/:
+# DANCE_TRIAL=dir holding its fold-0 dance.pt and fold-1 dance-fold1.pt, exported to dir/models-*,
+# then the held-out songs of both folds (12 seeds) and every shared song whole, into dir/judged.json
+DANCE_TRIAL ?= runs/dance-trial
+judge-dance: $(VENV)/.dev
+	rm -rf $(DANCE_TRIAL)/models-f0 $(DANCE_TRIAL)/models-f1
+	$(PY) -m model_export.dance --checkpoint $(DANCE_TRIAL)/dance.pt --models-dir $(DANCE_TRIAL)/models-f0
+	$(PY) -m model_export.dance --checkpoint $(DANCE_TRIAL)/dance-fold1.pt \
+		--models-dir $(DANCE_TRIAL)/models-f1 --name dance-dwm-fold1
+	MOTION_MODELS_DIR=$(DANCE_TRIAL)/models-f0 $(PY) -m training.eval_dance --held-out-only \
+		--whole-songs --fold-models $(DANCE_TRIAL)/models-f1 --json $(DANCE_TRIAL)/judged.json
 
 show-dance: $(VENV)/.dev
 	$(PY) -m training.show_dance

@@ -574,11 +574,14 @@ def evaluate(
     test_songs=None,
     shared_names: list[str] | None = None,
     held_out_only: bool = False,
+    whole_songs: bool = False,
     fold_models: list[Path] = (),
 ) -> dict:
     """All parts: ``test_songs`` (default the whole beat test set) and ``shared_names``
     (default every shared song) narrow the first two; ``held_out_only`` runs only the
-    held-out songs' part (genre, feet, distances: what compares two models).
+    held-out songs' part (genre, feet, distances: what compares two models), and with
+    ``whole_songs`` the shared songs too (a stall there failed two trials that passed on
+    the held-out songs).
     ``fold_models``: model folders of the same recipe trained with other songs held out;
     each is judged on its own held-out songs, and ``folds`` reports every fold and all of
     them pooled."""
@@ -595,6 +598,7 @@ def evaluate(
     }
     if not held_out_only:
         report["generated_set"] = generated_set(engine, 1, log, test_songs)
+    if not held_out_only or whole_songs:
         report["shared_songs"] = shared_songs(engine, log, names=shared_names)
     held = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
@@ -831,6 +835,11 @@ def main(argv: list[str] | None = None) -> int:
         help="only the held-out songs (genre, feet, distances): to compare models",
     )
     p.add_argument(
+        "--whole-songs",
+        action="store_true",
+        help="with --held-out-only: every shared song danced whole too (stalls, danced beats)",
+    )
+    p.add_argument(
         "--fold-models",
         type=Path,
         action="append",
@@ -847,7 +856,7 @@ def main(argv: list[str] | None = None) -> int:
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
     else:
         report = evaluate(args.seeds, held_out_only=args.held_out_only,
-                          fold_models=args.fold_models)  # fmt: skip
+                          whole_songs=args.whole_songs, fold_models=args.fold_models)  # fmt: skip
     publish(report, markdown(report), args.json)
     return 0
 

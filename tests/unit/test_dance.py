@@ -359,8 +359,9 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
         return folder
 
     monkeypatch.setenv("MOTION_MODELS_DIR", str(fold_copy(0, [songs[0]])))
-    report = ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True,
-                         fold_models=[fold_copy(1, [songs[1]])])  # fmt: skip
+    report = ED.evaluate(seeds=1, log=lambda *_: None, held_out_only=True, whole_songs=True,
+                         shared_names=[songs[0]], fold_models=[fold_copy(1, [songs[1]])])  # fmt: skip
+    assert list(report["shared_songs"]) == [songs[0]] and "generated_set" not in report
     rows, pooled = report["folds"]["per_fold"], report["folds"]["pooled"]
     assert [(r["fold"], r["songs"]) for r in rows] == [(0, [songs[0]]), (1, [songs[1]])]
     assert pooled["songs"] == list(songs)
@@ -377,6 +378,7 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     assert pooled["songs_on_the_beat"] == sum(r["songs_on_the_beat"] for r in rows) <= 2
     whole = [r["whole_songs"] for r in rows]  # each fold's song danced whole by its model
     assert [w["songs"] for w in whole] == [1, 1] and pooled["whole_songs"]["songs"] == 2
+    assert rows[0]["whole_songs"]["stalls"] == report["shared_songs"][songs[0]]["stalls"]
     assert pooled["whole_songs"]["stalls"] == sum(w["stalls"] for w in whole)
     assert pooled["whole_songs"]["slowest_5s_share"] == min(w["slowest_5s_share"] for w in whole)
     speeds = [r["speed_against_genre"] for r in rows]
