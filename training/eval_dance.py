@@ -1,6 +1,7 @@
 """Evaluation of the shipped dance model (jacob2019 made to work).
 
     python -m training.eval_dance [--seeds 12] [--json PATH] [--quick] [--fold-models DIR]
+                                  [--held-out-only [--whole-songs]]
 
 (``python -m model_export.evaluations PATH`` then records the report in the model's
 manifest entry.)
@@ -21,8 +22,9 @@ a beat). Parts:
   the shifted known grids; stalls;
 - **shared songs** (every Dance with Melody song, whole, its own genre): beat alignment
   against the tracker's beats (at the metrical level of the song's genre, the beats the
-  service warps to and reports: ``AudioFeatures.for_genre``) and against the beats at the song's danced (else librosa's)
-  tempo (``training.dance_tempo``), beside shifted grids; stalls. On the four held-out songs
+  service warps to and reports: ``AudioFeatures.for_genre``) and against the beats at the
+  song's danced (else librosa's) tempo (``training.dance_tempo``), beside shifted grids;
+  stalls. On the four held-out songs
   (the model's fold: its manifest entry's ``validation_takes``; the part the real dance
   covers) also the real dance's alignment against the same tracker's beats, and the warp's
   share (no warp);
