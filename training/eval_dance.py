@@ -358,14 +358,14 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     for name, genre, real, samples, sr in held:
         # the level the service tracks for the song's genre, as for whole songs: on DANCE_W_14
         # the general tracker locks at 118 bpm, 4:3 of the waltz's 87
-        beats = audio_features.frame_features(samples, sr, DF.FPS).for_genre(genre)[1]
+        tempo, beats, _ = audio_features.frame_features(samples, sr, DF.FPS).for_genre(genre)
         known = reference_beats(samples, sr, reference_tempo(table[name])[0])
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
         feet("real", real)
         legs_jerk("real", real)
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
-        song = {"genre": genre, "seconds": round(len(samples) / sr, 1),
+        song = {"genre": genre, "seconds": round(len(samples) / sr, 1), "tempo": round(tempo, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
         for seed in range(seeds):
             for asked in DF.MUSIC_GENRES:

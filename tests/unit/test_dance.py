@@ -325,6 +325,25 @@ def test_the_held_out_songs_are_the_models_fold():
     assert len(train) == 23 - len(TD.FOLDS[1])
 
 
+def test_held_out_dances_are_judged_on_the_beats_of_their_genre():
+    """The general tracker counts DANCE_W_26's eighth notes (171 bpm); its held-out dances
+    are judged on the beats the service dances a waltz to and reports (about 87 bpm)."""
+    from motion import audio_features
+    from motion import dance_features as DF
+    from tests.conftest import data_path
+    from training import eval_dance as ED
+
+    data_path("dance-with-melody")  # skips without the dance data
+    held, _ = ED.held_out_songs(["DANCE_W_26"])
+    ((_, genre, _, samples, sr),) = held
+    assert audio_features.frame_features(samples, sr, DF.FPS).tempo > 160
+    engine, _ = ED.load_engine()
+    report = ED.held_out(engine, 1, log=lambda *_: None, takes=["DANCE_W_26"])
+    song = report["songs"]["DANCE_W_26"]
+    assert genre == "waltz" and 80 < song["tempo"] < 95
+    assert all(ED.on_the_beat(d["bas"], d["chance"]) for d in song["generated"])
+
+
 def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch):
     """``evaluate(fold_models=...)``: each model folder is judged on the songs its entry
     holds out, and the pooled row sums the folds. Two copies of the shipped models stand in
