@@ -451,12 +451,9 @@ def distance_table(distances: dict) -> list[str]:
     for half in HALVES:
         for genre, row in distances[half].items():
             for kind, label in (("kinetic", "FID_k"), ("geometric", "FID_g")):
-                gaps = row[kind]["largest_gaps"]
-                spread = row[kind].get("generated_spread_share")
+                gaps, spread = row[kind]["largest_gaps"], row[kind]["generated_spread_share"]
                 lines.append(
-                    f"- {half} {genre} {label}"
-                    + ("" if spread is None else f" (spread {spread:.0%})")
-                    + ": "
+                    f"- {half} {genre} {label} (spread {spread:.0%}): "
                     + "; ".join(
                         f"{x['feature']} {x['term']:.1f} ({x['generated']:.3g} / {x['real']:.3g})"
                         for x in gaps

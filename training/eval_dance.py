@@ -24,10 +24,9 @@ a beat). Parts:
   against the tracker's beats (at the metrical level of the song's genre, the beats the
   service warps to and reports: ``AudioFeatures.for_genre``) and against the beats at the
   song's danced (else librosa's) tempo (``training.dance_tempo``), beside shifted grids;
-  stalls. On the four held-out songs
-  (the model's fold: its manifest entry's ``validation_takes``; the part the real dance
-  covers) also the real dance's alignment against the same tracker's beats, and the warp's
-  share (no warp);
+  stalls. On the four held-out songs (the model's fold: its manifest entry's
+  ``validation_takes``; the part the real dance covers) also the real dance's alignment
+  against the same tracker's beats, and the warp's share (no warp);
 - **ten minutes**: the held-out songs' music looped to 10 minutes, one generation per seed:
   stalls, mean joint speed per 30 s;
 - **genre**: a classifier of dance motion (``training.judges.ClipClassifier`` on
