@@ -174,17 +174,13 @@ def dance_rows(entry, settings, lengths, repeats: int, threads: int) -> tuple[li
         audio_t, code_t, genre_t, start_t = (
             torch.from_numpy(a) for a in (audio, code, genre, start)
         )
-        latent = rng.standard_normal((1, model.config.latent)).astype(np.float32)
-        latent_t = torch.from_numpy(latent) if model.config.latent else None
 
         def ort_audio(audio=audio):
             return sessions["audio"].run(None, {"audio": audio})
 
-        def ort_steps(code=code, genre=genre, start=start, latent=latent, latent_t=latent_t):
+        def ort_steps(code=code, genre=genre, start=start):
             zeros = np.zeros((1, hidden), np.float32)
             feeds = {"genre": genre, "h1": zeros, "c1": zeros, "h2": zeros, "c2": zeros}
-            if latent_t is not None:
-                feeds["latent"] = latent
             prev = start
             step = sessions["step"]
             for t in range(1, len(code)):
@@ -198,12 +194,12 @@ def dance_rows(entry, settings, lengths, repeats: int, threads: int) -> tuple[li
                 code, logits = model.encode_audio(audio)
                 return code, torch.softmax(logits, dim=-1)
 
-        def torch_steps(code=code_t, genre=genre_t, start=start_t, latent_t=latent_t):
+        def torch_steps(code=code_t, genre=genre_t, start=start_t):
             with torch.inference_mode():
                 state = model.init_state(1)
                 prev = start
                 for t in range(1, len(code)):
-                    prev, *state = model.step(code[t : t + 1], genre, prev, *state, latent=latent_t)
+                    prev, *state = model.step(code[t : t + 1], genre, prev, *state)
                 return prev
 
         times = {}

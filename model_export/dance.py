@@ -8,8 +8,7 @@ Two graphs, both with a symbolic batch axis:
   128)`` and ``genre_probs (batch, 4)`` (the classifier head over the music genres);
 - ``step``: one frame of generation with the LSTM states explicit, ``code (batch, 128)``,
   ``genre (batch, 7)`` (one-hot or probabilities), ``prev (batch, 134)`` standardised pose,
-  ``h1, c1, h2, c2 (batch, hidden)`` and, for a network with a phrase latent, ``latent
-  (batch, latent)`` -> ``pose (batch, 134)`` and ``h1_out .. c2_out``.
+  ``h1, c1, h2, c2 (batch, hidden)`` -> ``pose (batch, 134)`` and ``h1_out .. c2_out``.
 
 Writes ``models/dance/{audio,step}.onnx`` and ``models/dance/stats.npz`` (feature statistics
 and the seeded start poses) and the manifest entry ``dance-dwm``. Parity with torch is
@@ -61,8 +60,8 @@ class StepGraph(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, code, genre, prev, h1, c1, h2, c2, latent=None):
-        return self.model.step(code, genre, prev, h1, c1, h2, c2, latent=latent)
+    def forward(self, code, genre, prev, h1, c1, h2, c2):
+        return self.model.step(code, genre, prev, h1, c1, h2, c2)
 
 
 def _export(module, args, path: Path, inputs, outputs, dynamic) -> None:
@@ -100,14 +99,10 @@ def export_graphs(model: TD.DanceNet, out: Path) -> None:
     step_inputs = ["code", "genre", "prev", *STATE_NAMES]
     step_outputs = ["pose", *(f"{n}_out" for n in STATE_NAMES)]
     zeros = torch.zeros(1, hidden)
-    latent = ()
-    if model.config.latent:
-        step_inputs.append("latent")
-        latent = (torch.zeros(1, model.config.latent),)
     _export(
         StepGraph(model),
         (torch.zeros(1, code), torch.zeros(1, len(DF.GENRES)),
-         torch.zeros(1, DF.MOTION_CHANNELS), zeros, zeros, zeros, zeros, *latent),
+         torch.zeros(1, DF.MOTION_CHANNELS), zeros, zeros, zeros, zeros),
         out / "step.onnx",
         step_inputs,
         step_outputs,
@@ -118,7 +113,6 @@ def export_graphs(model: TD.DanceNet, out: Path) -> None:
 def graph_specs(model: TD.DanceNet) -> dict:
     hidden, code = model.config.hidden, model.config.code
     states = [(n, ["batch", hidden]) for n in STATE_NAMES]
-    latent = [("latent", ["batch", model.config.latent])] if model.config.latent else []
     return {
         "audio": MF.graph_spec(
             f"{FOLDER}/audio.onnx",
@@ -130,7 +124,7 @@ def graph_specs(model: TD.DanceNet) -> dict:
             f"{FOLDER}/step.onnx",
             OPSET,
             [("code", ["batch", code]), ("genre", ["batch", len(DF.GENRES)]),
-             ("prev", ["batch", DF.MOTION_CHANNELS]), *states, *latent],
+             ("prev", ["batch", DF.MOTION_CHANNELS]), *states],
             [("pose", ["batch", DF.MOTION_CHANNELS]), *((f"{n}_out", s) for n, s in states)],
         ),
     }  # fmt: skip
@@ -164,18 +158,13 @@ def parity(model: TD.DanceNet, out: Path, seed: int = 0, steps: int = PARITY_STE
     genre = torch.softmax(torch.randn(batch, len(DF.GENRES), generator=gen), -1)
     prev_t = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
     state_t = model.init_state(batch)
-    latent = None
-    if model.config.latent:
-        latent = torch.randn(batch, model.config.latent, generator=gen)
     worst_step = 0.0
     for t in range(steps):
         feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_t.numpy()}
         feeds.update({n: s.numpy() for n, s in zip(STATE_NAMES, state_t, strict=True)})
-        if latent is not None:
-            feeds["latent"] = latent.numpy()
         got = step.run(None, feeds)
         with torch.no_grad():
-            prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t, latent=latent)
+            prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
         for g, w in zip(got, [prev_t, *state_t], strict=True):
             w = w.numpy()
             if not np.allclose(g, w, rtol=RTOL, atol=ATOL):
@@ -220,7 +209,6 @@ def export_bundle(
             "genres": list(DF.GENRES),
             "music_genres": list(DF.MUSIC_GENRES),
             "hidden": model.config.hidden,
-            "latent": model.config.latent,
             "fps": DF.FPS,
             "audio_channels": DF.AUDIO_CHANNELS,
             "motion_channels": DF.MOTION_CHANNELS,

@@ -57,7 +57,6 @@ MUSIC_GENRES = GENRES[:4]
 
 AUDIO_CHANNELS = audio_features.FEATURE_DIM
 BEAT_COLUMNS = slice(AUDIO_CHANNELS - 2, AUDIO_CHANNELS)  # beat_sin, beat_cos
-TIMBRE_COLUMNS = slice(0, AUDIO_CHANNELS - 3)  # log-mel and the spectral summary
 
 ROTATION_CHANNELS = 6 * len(BODY)
 ROOT_CHANNELS = 4
@@ -87,22 +86,6 @@ def genre_vector(name: str | None = None, probabilities: np.ndarray | None = Non
     elif probabilities is not None:
         out[: len(MUSIC_GENRES)] = np.asarray(probabilities, dtype=np.float32)
     return out
-
-
-PHRASE_FRAMES = 64
-"""Frames between two drawn phrase latents: the length of the windows the latent was
-trained on, one per window."""
-
-
-def phrase_latents(frames: int, dims: int, rng: np.random.Generator) -> np.ndarray:
-    """``(frames, dims)`` float32: the dance network's phrase latent for each frame, drawn
-    from its prior N(0, I) every :data:`PHRASE_FRAMES` frames and linearly interpolated
-    between, so one phrase flows into the next instead of jumping."""
-    knots = rng.standard_normal((frames // PHRASE_FRAMES + 2, dims))
-    at = np.arange(frames) / PHRASE_FRAMES
-    low = at.astype(int)
-    frac = (at - low)[:, None]
-    return ((1.0 - frac) * knots[low] + frac * knots[low + 1]).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- audio

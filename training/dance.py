@@ -76,7 +76,6 @@ WEIGHTS = {
     "match": 0.0,
     "diversity": 0.0,
     "free_skate": 0.0,
-    "kl": 0.05,
 }
 GUARDS = ("judge", "prior", "match", "diversity", "free_skate")
 """The loss terms that need the judge of real dances (``training.dance_genre``)."""
@@ -116,7 +115,6 @@ class Config:
     genre_dim: int = 16
     dropout: float = 0.25
     film: bool = False  # the genre also scales and shifts each LSTM layer's output
-    latent: int = 0  # dimensions of the phrase latent (0: none)
 
 
 class DanceNet(nn.Module):
@@ -151,10 +149,6 @@ class DanceNet(nn.Module):
             for layer in (self.film1, self.film2):
                 nn.init.zeros_(layer.weight)
                 nn.init.zeros_(layer.bias)
-        if cfg.latent:  # zero as FiLM's: a network fine-tuned from one without starts there
-            self.latent = nn.Linear(cfg.latent, cfg.hidden, bias=False)
-            nn.init.zeros_(self.latent.weight)
-            self.posterior = Posterior(cfg.latent)
 
     def encode_audio(self, audio: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         code = self.audio(audio)
@@ -164,18 +158,13 @@ class DanceNet(nn.Module):
         z = torch.zeros(batch, self.config.hidden)
         return z, z, z, z
 
-    def step(self, code, genre, prev, h1, c1, h2, c2, latent=None):
-        """``latent (B, latent)`` is required when the network has one."""
+    def step(self, code, genre, prev, h1, c1, h2, c2):
         x = torch.cat([code, self.genre(genre), prev], dim=-1)
         h1, c1 = self.cell1(x, (h1, c1))
-        x = self.drop(h1)
-        if self.config.film:
-            x = self._film(self.film1, genre, x)
-        if self.config.latent:
-            x = x + self.latent(latent)
-        h2, c2 = self.cell2(x, (h2, c2))
         if not self.config.film:
+            h2, c2 = self.cell2(self.drop(h1), (h2, c2))
             return self.out(h2), h1, c1, h2, c2
+        h2, c2 = self.cell2(self._film(self.film1, genre, self.drop(h1)), (h2, c2))
         return self.out(self._film(self.film2, genre, h2)), h1, c1, h2, c2
 
     def _film(self, layer: nn.Linear, genre: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
@@ -187,23 +176,17 @@ class DanceNet(nn.Module):
         return x * scale + nn.functional.linear(genre, layer.weight[n:], layer.bias[n:])
 
     def rollout(
-        self,
-        code,
-        genre,
-        motion,
-        gt_mask: torch.Tensor | None = None,
-        warm: int = 0,
-        latent: torch.Tensor | None = None,
+        self, code, genre, motion, gt_mask: torch.Tensor | None = None, warm: int = 0
     ) -> torch.Tensor:
         """Poses ``(B, T - 1, M)`` for frames 1.. of ``motion (B, T, M)``: frame 0 is given;
         each later frame is fed back its own prediction, or the ground truth where
         ``gt_mask`` (``(T,)``, or ``(B, T)`` per window) is true (and for the first ``warm``
-        frames); ``latent (B, latent)`` holds for the whole window."""
+        frames)."""
         state = self.init_state(motion.shape[0])
         prev = motion[:, 0]
         outs = []
         for t in range(1, motion.shape[1]):
-            pose, *state = self.step(code[:, t], genre, prev, *state, latent=latent)
+            pose, *state = self.step(code[:, t], genre, prev, *state)
             outs.append(pose)
             if t < warm:
                 prev = motion[:, t]
@@ -214,33 +197,6 @@ class DanceNet(nn.Module):
             else:
                 prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
         return torch.stack(outs, dim=1)
-
-
-class Posterior(nn.Module):
-    """What a window's real motion ``(B, T, M)`` says of its phrase latent: the mean and
-    log-variance ``(B, latent)`` of a Gaussian (a conditional VAE's encoder: the network
-    learns which variety real dances have, instead of having noise pushed into it)."""
-
-    def __init__(self, latent: int, width: int = 128) -> None:
-        super().__init__()
-        self.conv = nn.Sequential(
-            nn.Conv1d(DF.MOTION_CHANNELS, width, 5, padding=2),
-            nn.ReLU(),
-            nn.Conv1d(width, width, 5, stride=2, padding=2),
-            nn.ReLU(),
-        )
-        self.head = nn.Linear(width, 2 * latent)
-
-    def forward(self, motion: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        mean, log_var = self.head(self.conv(motion.transpose(1, 2)).mean(dim=2)).chunk(2, -1)
-        return mean, log_var.clamp(-8.0, 4.0)
-
-
-def latent_kl(mean: torch.Tensor, log_var: torch.Tensor, free_bits: float) -> torch.Tensor:
-    """KL of ``N(mean, exp(log_var))`` to ``N(0, I)`` summed over dimensions, each at least
-    ``free_bits`` nats (Kingma et al. 2016), so the latent is used, averaged over the batch."""
-    per_dim = 0.5 * (mean**2 + log_var.exp() - 1.0 - log_var)
-    return per_dim.mean(dim=0).clamp(min=free_bits).sum()
 
 
 def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.Tensor:
@@ -284,12 +240,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="share of music windows conditioned on the predicted genre")  # fmt: skip
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--hidden", type=int, default=Config.hidden)
-    p.add_argument("--latent", type=int, default=0,
-                   help="phrase latent dimensions (a network started with --init keeps its own)")  # fmt: skip
-    p.add_argument("--timbre-dropout", type=float, default=0.0,
-                   help="share of music windows whose timbre (not onsets, not beats) is hidden")  # fmt: skip
-    p.add_argument("--free-bits", type=float, default=0.25,
-                   help="nats per latent dimension the KL does not charge")  # fmt: skip
     for name, value in WEIGHTS.items():
         p.add_argument(f"--w-{name.replace('_', '-')}", dest=f"w_{name}", type=float,
                        default=value, help=f"{name} loss weight")  # fmt: skip
@@ -350,20 +300,14 @@ def load_checkpoint(path: Path = CHECKPOINT) -> tuple[DanceNet, DF.DanceStats, d
 
 
 def init_from(path: Path, config: Config) -> tuple[DanceNet, DF.DanceStats, dict]:
-    """A network with the weights of checkpoint ``path`` and its sizes, FiLM and the phrase
-    latent as ``config`` or the checkpoint has them (layers the checkpoint lacks keep their
-    zero start; the posterior its random one); the checkpoint."""
+    """A network with the weights of checkpoint ``path`` and its sizes, FiLM as ``config``
+    says (layers the checkpoint lacks keep their zero start); the checkpoint."""
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    saved = ckpt["net_config"]
-    config = dataclasses.replace(
-        config,
-        **{k: v for k, v in saved.items() if k not in ("film", "latent")},
-        film=config.film or bool(saved.get("film")),
-        latent=int(saved.get("latent", 0)) or config.latent,
-    )
+    config = dataclasses.replace(config, **{k: v for k, v in ckpt["net_config"].items()
+                                            if k != "film"})  # fmt: skip
     model = DanceNet(config)
     missing, unexpected = model.load_state_dict(ckpt["model"], strict=False)
-    if unexpected or any(not k.startswith(("film", "latent", "posterior")) for k in missing):
+    if unexpected or any(not k.startswith("film") for k in missing):
         raise ValueError(f"{path} does not fit: missing {missing}, unexpected {unexpected}")
     model.train()
     return model, DF.DanceStats.from_arrays(ckpt["stats"]), ckpt
@@ -373,12 +317,6 @@ def train_step(
     model, losses, batch, args, rng, step, weights, judge=None
 ) -> dict[str, torch.Tensor]:
     audio, motion, genre, music = batch
-    hidden = torch.zeros_like(music)
-    if args.timbre_dropout > 0:  # drawn only then: the shipped stages replay as they ran
-        hidden = music & (torch.rand(len(genre)) < args.timbre_dropout)
-    if hidden.any():  # the song unrecognisable, its rhythm kept: the phrase must come from z
-        audio = audio.clone()
-        audio[hidden, :, DF.TIMBRE_COLUMNS] = 0.0
     code, logits = model.encode_audio(audio)
     asked = genre.clone()
     swapped = TG.swap_genres(asked, music, args.swap_share, rng)
@@ -388,30 +326,21 @@ def train_step(
         probs = torch.softmax(logits.detach(), dim=-1)
         predicted = torch.zeros_like(onehot)
         predicted[:, : len(DF.MUSIC_GENRES)] = probs
-        use = music & ~swapped & ~hidden & (torch.rand(len(genre)) < args.predicted_genre)
+        use = music & ~swapped & (torch.rand(len(genre)) < args.predicted_genre)
         cond_vec = torch.where(use[:, None], predicted, onehot)
     cond = max(1, min(args.cond_frames, 1 + step * args.cond_frames // max(args.cond_ramp, 1)))
     mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng)
     if swapped.any():  # a swapped window has no ground truth to feed back
         mask = mask[None].expand(len(genre), -1) & ~swapped[:, None]
-    latent, kl = None, torch.zeros(())
-    if model.config.latent:  # a swapped window's real motion is another genre's: the prior
-        mean, log_var = model.posterior(motion)
-        posterior = mean + torch.randn_like(mean) * (0.5 * log_var).exp()
-        latent = torch.where(swapped[:, None], torch.randn_like(mean), posterior)
-        if not swapped.all():
-            kl = latent_kl(mean[~swapped], log_var[~swapped], args.free_bits)
-    pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm, latent=latent)
+    pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
     if swapped.all():
         parts = {k: torch.zeros(()) for k in ("feat", "pos", "effort", "skate")}
     else:
         parts = losses(pred[~swapped], motion[~swapped, 1:])
-    heard = music & ~hidden
-    if heard.any():
-        parts["genre"] = nn.functional.cross_entropy(logits[heard], genre[heard])
+    if music.any():
+        parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
         parts["genre"] = torch.zeros(())
-    parts["kl"] = kl
     for k in GUARDS:
         parts[k] = torch.zeros(())
     if judge is not None and music.any():
@@ -439,11 +368,7 @@ def validate(model, losses, val_batches, judge=None) -> dict[str, float]:
     for audio, motion, genre, music in val_batches:
         code, logits = model.encode_audio(audio)
         onehot = nn.functional.one_hot(genre, len(DF.GENRES)).float()
-        latent = prior = None
-        if model.config.latent:  # the real window's own phrase, and the prior's mean
-            latent = model.posterior(motion)[0]
-            prior = torch.zeros_like(latent[music])
-        pred = model.rollout(code, onehot, motion, None, warm=8, latent=latent)
+        pred = model.rollout(code, onehot, motion, None, warm=8)
         for k, v in losses(pred, motion[:, 1:]).items():
             totals[k] = totals.get(k, 0.0) + float(v) / len(val_batches)
         correct += int((logits[music].argmax(-1) == genre[music]).sum())
@@ -451,7 +376,7 @@ def validate(model, losses, val_batches, judge=None) -> dict[str, float]:
         if judge is not None:
             other = (genre[music] + 1) % len(DF.MUSIC_GENRES)
             asked = nn.functional.one_hot(other, len(DF.GENRES)).float()
-            pred = model.rollout(code[music], asked, motion[music], None, warm=8, latent=prior)
+            pred = model.rollout(code[music], asked, motion[music], None, warm=8)
             named = judge(TG.window_inputs(losses, pred[:, 7:])[0]).argmax(-1)
             judged += int((named == other).sum())
     totals["genre_acc"] = correct / max(count, 1)
@@ -485,7 +410,7 @@ def train(args: argparse.Namespace) -> None:
         poses, step, best = ckpt["start_poses"], int(ckpt["step"]), ckpt.get("best_val")
         stages = list(ckpt.get("stages", []))
     elif args.init is not None:
-        model, stats, start = init_from(args.init, Config(film=args.film, latent=args.latent))
+        model, stats, start = init_from(args.init, Config(film=args.film))
         require_fold(start, args.fold, args.init)
         poses, stages, step, best, ckpt = (
             start["start_poses"],
@@ -498,7 +423,7 @@ def train(args: argparse.Namespace) -> None:
         stats = DF.DanceStats.fit([s.audio for s in train_seqs if s.has_music],
                                   [s.motion for s in train_seqs])  # fmt: skip
         model, step, best, ckpt = (
-            DanceNet(Config(hidden=args.hidden, film=args.film, latent=args.latent)),
+            DanceNet(Config(hidden=args.hidden, film=args.film)),
             0,
             None,
             None,
@@ -584,25 +509,18 @@ def generate(
     audio_raw: np.ndarray,
     genre: np.ndarray,
     start: np.ndarray,
-    seed: int = 0,
 ) -> np.ndarray:
     """Raw poses ``(F, M)`` for raw audio input ``(F, A)``, genre vector ``(G,)`` and a raw
-    start pose ``(M,)`` (frame 0), free-running with the phrase latent (if any) seeded by
-    ``seed`` (torch; the service does this in ORT, and ``training.eval_dance`` judges the
-    service's result)."""
+    start pose ``(M,)`` (frame 0), free-running (torch; the service does this in ORT, and
+    ``training.eval_dance`` judges the service's result)."""
     model.eval()
     code, _ = model.encode_audio(torch.from_numpy(stats.normalize_audio(audio_raw))[None])
     g = torch.from_numpy(np.asarray(genre, np.float32))[None]
     prev = torch.from_numpy(stats.normalize_motion(start))[None]
     state = model.init_state(1)
-    latents = None
-    if model.config.latent:
-        rng = np.random.default_rng(seed)
-        latents = torch.from_numpy(DF.phrase_latents(len(audio_raw), model.config.latent, rng))
     out = [prev]
     for t in range(1, len(audio_raw)):
-        latent = None if latents is None else latents[t : t + 1]
-        prev, *state = model.step(code[:, t], g, prev, *state, latent=latent)
+        prev, *state = model.step(code[:, t], g, prev, *state)
         out.append(prev)
     return stats.denormalize_motion(torch.cat(out).numpy())
 

@@ -4,7 +4,7 @@ A request's song goes: decoded samples -> per-frame features at 30 fps for its w
 length (``motion.audio_features``; beats tracked on the song itself) -> standardised -> ``audio``
 graph (code per frame, genre probabilities) -> the ``step`` graph frame by frame, feeding
 back its own pose (LSTM states explicit), from a seeded start pose with seeded noise on the
-fed-back pose (and, for a network with one, a seeded phrase latent) -> raw features -> Butterworth low-pass -> standstills filled -> canonical
+fed-back pose -> raw features -> Butterworth low-pass -> standstills filled -> canonical
 motion (root integrated) -> contacts predicted and the feet planted there
 (``motion.dance_feet``) -> time warp putting its
 kinematic beats on the song's pulses (``motion.beat_warp``) -> the requested frame rate ->
@@ -104,7 +104,6 @@ class DanceEngine(Engine):
         self.stats = DF.DanceStats.from_arrays(arrays)
         self.start_poses = np.asarray(arrays["start_poses"], np.float32)
         self.hidden = int(self.entry.extra["hidden"])
-        self.latent = int(self.entry.extra.get("latent", 0))
         if list(self.entry.extra.get("genres", DF.GENRES)) != list(DF.GENRES):
             raise ValueError("the bundle's genres differ from motion.dance_features.GENRES")
 
@@ -127,8 +126,7 @@ class DanceEngine(Engine):
         self, code: np.ndarray, genre: np.ndarray, start: np.ndarray, seed: int
     ) -> np.ndarray:
         """Standardised poses ``(F, M)``: frame 0 is ``start``, each next one from the step
-        graph fed its own (seeded-noisy) output and, for a network with one, the seeded
-        phrase latent (drawn after the noise, so a network without one dances as before)."""
+        graph fed its own (seeded-noisy) output."""
         rng = np.random.default_rng(seed)
         frames = len(code)
         out = np.empty((frames, DF.MOTION_CHANNELS), np.float32)
@@ -139,13 +137,10 @@ class DanceEngine(Engine):
         prev = start[None].astype(np.float32)
         noise = (NOISE * rng.standard_normal((frames, DF.MOTION_CHANNELS))).astype(np.float32)
         noise[:, DF.CONTACTS] = 0.0
-        latents = DF.phrase_latents(frames, self.latent, rng) if self.latent else None
         session = self.sessions["step"]
         for t in range(1, frames):
             feeds["code"] = code[t : t + 1]
             feeds["prev"] = prev + noise[t]
-            if latents is not None:
-                feeds["latent"] = latents[t : t + 1]
             pose, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = session.run(None, feeds)
             out[t] = pose[0]
             prev = pose

@@ -131,54 +131,6 @@ def test_film_starts_as_the_network_it_fine_tunes(tmp_path, walk):
         TD.init_from(path, TD.Config(film=True))
 
 
-def test_a_phrase_latent_starts_as_the_network_it_fine_tunes_and_learns_to_be_used(tmp_path, walk):
-    """Added to a trained network, the latent changes nothing until trained (its projection
-    starts at zero); a few steps on real windows give it weight, so different latents then
-    give different poses; the KL charges nothing under the free bits."""
-    from training import dance as TD
-    from training.dance_data import Sequence, WindowSampler
-    from training.dance_losses import Losses
-
-    torch.manual_seed(0)
-    stats, m, a = _stats(walk)
-    plain = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval()
-    path = tmp_path / "plain.pt"
-    torch.save({"model": plain.state_dict(), "net_config": {"hidden": 32, "code": 16,
-                "audio_hidden": 32}, "stats": stats.arrays(), "start_poses": m[:2]}, path)  # fmt: skip
-    model, _, _ = TD.init_from(path, TD.Config(latent=4))
-    model.eval()
-    code, genre = torch.randn(2, 16), torch.eye(len(DF.GENRES))[[0, 3]]
-    prev = torch.randn(2, DF.MOTION_CHANNELS)
-    with torch.no_grad():
-        want = plain.step(code, genre, prev, *plain.init_state(2))
-        got = model.step(code, genre, prev, *model.init_state(2), latent=torch.randn(2, 4))
-    for w, g in zip(want, got, strict=True):
-        torch.testing.assert_close(w, g)
-
-    quiet = torch.zeros(3, 4)
-    assert float(TD.latent_kl(quiet, quiet, 0.25)) == pytest.approx(4 * 0.25)
-    assert float(TD.latent_kl(quiet + 2.0, quiet, 0.25)) == pytest.approx(4 * 2.0)
-
-    model.train()
-    seq = Sequence("walk", 3, a, m, True, True)
-    sampler = WindowSampler([seq], stats, 24, 0.0, seed=0)
-    args = TD.parse_args(["--window", "24", "--cond-ramp", "1"])
-    rng = np.random.default_rng(0)
-    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
-    for step in range(10):
-        parts = TD.train_step(model, Losses(stats), sampler.batch(4), args, rng, step, TD.WEIGHTS)
-        assert float(parts["kl"].detach()) >= 4 * args.free_bits - 1e-6
-        opt.zero_grad()
-        parts["total"].backward()
-        opt.step()
-    assert float(model.latent.weight.abs().max()) > 0
-    model.eval()
-    with torch.no_grad():
-        one = model.step(code, genre, prev, *model.init_state(2), latent=torch.zeros(2, 4))[0]
-        two = model.step(code, genre, prev, *model.init_state(2), latent=torch.ones(2, 4))[0]
-    assert float((one - two).abs().max()) > 1e-4
-
-
 def test_swapped_windows_train_the_film_layers_through_the_judge(walk):
     from training import dance as TD
     from training import dance_genre as TG
@@ -309,28 +261,3 @@ def test_a_stage_stops_at_its_stop_step_and_a_resumed_run_never_passes_it():
     assert TD.run_bounds(0, args) == (1000, 300)
     assert TD.run_bounds(900, args) == (1000, 1000)
     assert TD.run_bounds(0, TD.parse_args(["--steps", "50"])) == (50, 50)
-
-
-def test_hidden_timbre_leaves_the_rhythm_heard(walk):
-    """A window whose timbre is hidden dances the same whatever the song sounds like, but
-    not whatever its onsets are."""
-    from training import dance as TD
-    from training.dance_losses import Losses
-
-    stats, m, a = _stats(walk)
-    model = TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval()
-    args = TD.parse_args(["--window", "24", "--timbre-dropout", "1.0"])
-    motion = torch.from_numpy(stats.normalize_motion(m[:24]))[None]
-    audio = torch.from_numpy(stats.normalize_audio(a[:24]))[None]
-    batch = (audio, motion, torch.tensor([1]), torch.tensor([True]))
-
-    def loss(audio):
-        torch.manual_seed(0)
-        parts = TD.train_step(model, Losses(stats), (audio, *batch[1:]), args,
-                              np.random.default_rng(0), 0, TD.WEIGHTS)  # fmt: skip
-        return float(parts["feat"].detach())
-
-    timbre, onset = audio.clone(), audio.clone()
-    timbre[..., DF.TIMBRE_COLUMNS] += 3.0
-    onset[..., DF.AUDIO_CHANNELS - 3] += 3.0
-    assert loss(timbre) == loss(audio) != loss(onset)
