@@ -26,7 +26,9 @@ leg lengths), Laban effort (angular-velocity energy per window, log ratio), foot
 under ground-truth contacts, genre cross-entropy. Whole songs are held out by take. With
 ``--swap-share`` some music windows are asked another genre and judged by a convolutional
 classifier of real dances, a per-genre kinetic prior, a diversity guard and a skating loss
-on their stillest foot instead (``training.dance_genre``: why and how).
+on their stillest foot instead (``training.dance_genre``: why and how). Validation
+runs free on fixed windows of the held-out songs and, as ``training_songs_feat``, of the
+training songs: the gap between the two is how much of the dance is memorised.
 
 Writes ``checkpoints/dance.pt`` (weights, step, config and the feature statistics: what an
 export needs) and the optimiser beside it in ``dance.pt.state`` (for ``--resume``, never
@@ -436,6 +438,8 @@ def train(args: argparse.Namespace) -> None:
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
     val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
+    seen_sampler = WindowSampler(train_seqs, stats, args.window, 0.0, 77)
+    seen_batches = [seen_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
     judge = None
     if any(weights[k] > 0 for k in GUARDS):
         judge = TG.fit_judge(
@@ -478,6 +482,8 @@ def train(args: argparse.Namespace) -> None:
             tb.add_scalar("train/iterations_per_s", rate, step)
         if step % args.val_every == 0 or step == stop_at:
             val = validate(model, losses, val_batches, judge)
+            # beside the held-out songs' loss, how well it knows its own: a memoriser's gap
+            val["training_songs_feat"] = validate(model, losses, seen_batches)["feat"]
             if tb:
                 for k, v in val.items():
                     tb.add_scalar(f"val/{k}", v, step)

@@ -145,6 +145,31 @@ def test_rollout_losses_and_a_few_steps_learn(walk):
     assert raw.shape == (40, DF.MOTION_CHANNELS) and np.all(np.isfinite(raw))
 
 
+def test_training_validates_on_its_own_songs_beside_the_held_out_ones(
+    tmp_path, walk, monkeypatch, capsys
+):
+    """The validation line says how well the network knows its training songs beside the
+    held-out ones: after a hundred steps on one dance, that dance's loss is far under an unseen
+    one's."""
+    from training import dance as TD
+    from training.dance_data import Sequence
+
+    m = DF.encode(walk).features
+    rng = np.random.default_rng(0)
+    audio = [rng.normal(size=(len(m), DF.AUDIO_CHANNELS)).astype(np.float32) for _ in "ab"]
+    unseen = m[::-1].copy()  # the walk backwards
+    seqs = [Sequence("seen", 3, audio[0], m, True, True),
+            Sequence(TD.FOLDS[0][0], 3, audio[1], unseen, True, True)]  # fmt: skip
+    monkeypatch.setattr(TD, "prepare", lambda: seqs)
+    monkeypatch.delenv("MOTION_SMOKE", raising=False)
+    TD.main(["--hidden", "32", "--window", "24", "--batch", "8", "--steps", "100", "--lr", "3e-3",
+             "--val-every", "100", "--cmu-share", "0", "--threads", "1",
+             "--checkpoint", str(tmp_path / "dance.pt"), "--log-dir", str(tmp_path / "runs")])  # fmt: skip
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("step 100 val"))
+    figures = dict(zip(line.split()[3::2], map(float, line.split()[4::2]), strict=True))
+    assert figures["training_songs_feat"] < 0.5 * figures["feat"], figures
+
+
 def test_ac_mask_alternates():
     from training import dance as TD
 
