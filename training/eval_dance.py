@@ -61,13 +61,13 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import audio_decode, audio_features, beat_tracking, spectral
+from motion import audio_decode, beat_tracking, spectral
 from motion import beat_warp as BW
 from motion import contacts as CT
 from motion import dance_features as DF
 from motion import kinematics as K
 from motion.skeleton import Motion
-from service.engines.dance import DanceJob
+from service.engines.dance import DanceJob, song_features
 from service.metrics import StageTimer
 from training import dance_metrics as DM
 from training.measuring_machine import measuring_machine
@@ -189,7 +189,7 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
 
     rows = []
     for i, song in enumerate(songs if songs is not None else beat_test_set()):
-        feats = audio_features.frame_features(song.samples, song.sr, DF.FPS)
+        feats = song_features(song.samples, song.sr)
         row = {
             "pattern": song.pattern,
             "bpm": song.bpm,
@@ -203,7 +203,7 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
             genre = DF.MUSIC_GENRES[(i + seed) % len(DF.MUSIC_GENRES)]
             if song.pattern == "waltz":  # a 3/4 song is danced as a waltz
                 genre = "waltz"
-            job = DanceJob(song.samples, song.sr, genre=genre, seed=seed)
+            job = DanceJob(song.samples, song.sr, genre=genre, seed=seed, features=feats)
             out = engine.predict(job, StageTimer(engine.name)).motion
             score, chance = BW.alignment(out, song.beats)
             row["dances"].append({"genre": genre, "bas": round(score, 4),
@@ -240,9 +240,10 @@ def shared_songs(engine, log=print, names=None) -> dict:
             continue
         samples, sr = audio_decode.decode(folder / "audio.mp3")
         genre = DWM_GENRES[folder.name.split("_")[1]]
-        result = engine.predict(DanceJob(samples, sr, genre=genre), StageTimer(engine.name))
-        frames = result.motion.num_frames
-        playing = audio_features.frame_features(samples, sr, DF.FPS, frames).playing
+        feats = song_features(samples, sr)
+        job = DanceJob(samples, sr, genre=genre, features=feats)
+        result = engine.predict(job, StageTimer(engine.name))
+        playing = feats.playing  # the dance has the features' frames: the warp keeps them
         reference, how = reference_tempo(table[folder.name])
         known, known_chance = BW.alignment(result.motion, reference_beats(samples, sr, reference))
         rows[folder.name] = {
@@ -357,7 +358,8 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
     for name, genre, real, samples, sr in held:
         # the level the service tracks for the song's genre, as for whole songs: on DANCE_W_14
         # the general tracker locks at 118 bpm, 4:3 of the waltz's 87
-        tempo, beats, _ = audio_features.frame_features(samples, sr, DF.FPS).for_genre(genre)
+        feats = song_features(samples, sr)  # once: every seed and genre dances from them
+        tempo, beats, _ = feats.for_genre(genre)
         known = reference_beats(samples, sr, reference_tempo(table[name])[0])
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
@@ -368,7 +370,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
         for seed in range(seeds):
             for asked in DF.MUSIC_GENRES:
-                job = DanceJob(samples, sr, genre=asked, seed=seed)
+                job = DanceJob(samples, sr, genre=asked, seed=seed, features=feats)
                 out = engine.predict(job, StageTimer(engine.name)).motion
                 named = genre_clf.predict(genre_features(out))
                 confusion[asked][named] += 1
@@ -391,7 +393,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
                 song.setdefault("generated_reference", []).append(
                     {"bas": round(s, 4), "chance": round(c, 4)}
                 )
-            job = DanceJob(samples, sr, genre=genre, seed=seed, beat_warp=False)
+            job = DanceJob(samples, sr, genre=genre, seed=seed, beat_warp=False, features=feats)
             raw = engine.predict(job, StageTimer(engine.name)).motion
             rows["generated_no_warp"].append(BW.alignment(raw, beats))
         songs[name] = song
@@ -546,14 +548,14 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
     sr = music[0][1]
     loop = np.concatenate([m for m, s in music if s == sr])
     long_song = np.resize(loop, int(TEN_MINUTES * sr))
-    playing = audio_features.frame_features(long_song, sr, DF.FPS).playing
+    feats = song_features(long_song, sr)
     per_seed = []
     for seed in range(seeds):
-        job = DanceJob(long_song, sr, genre="waltz", seed=seed)
+        job = DanceJob(long_song, sr, genre="waltz", seed=seed, features=feats)
         out = engine.predict(job, StageTimer(engine.name))
         per_seed.append({"seed": seed, "frames": out.motion.num_frames,
                          **energy_blocks(body_speed(out.motion), out.motion.fps),
-                         **stall_figures(out.motion, playing)})  # fmt: skip
+                         **stall_figures(out.motion, feats.playing)})  # fmt: skip
         log(f"ten minutes, seed {seed}: {json.dumps(per_seed[-1])}")
     return {
         "frames": per_seed[0]["frames"],

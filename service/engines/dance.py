@@ -49,6 +49,7 @@ class DanceJob:
     seed: int = 0
     beat_warp: bool = True
     foot_cleanup: bool = True
+    features: audio_features.AudioFeatures | None = None
     clip: Clip | None = None
     fps: float = DF.FPS
     frames: int = 0  # of the answer at ``fps``
@@ -91,6 +92,13 @@ class DanceResult:
     bas: float
     bas_chance: float
     warnings: list[str] = field(default_factory=list)
+
+
+def song_features(samples: np.ndarray, sr: int) -> audio_features.AudioFeatures:
+    """The features a dance of ``samples`` at ``sr`` is made from: at 30 fps, every instant
+    of the song covered (two frames at least)."""
+    frames = max(2, math.ceil(len(samples) / sr * DF.FPS - 1e-9))
+    return audio_features.frame_features(samples, sr, DF.FPS, frames)
 
 
 class DanceEngine(Engine):
@@ -176,8 +184,9 @@ class DanceEngine(Engine):
 
     def _music(self, job: DanceJob, timer: StageTimer) -> Music:
         with timer.stage("features"):
-            frames = max(2, math.ceil(len(job.samples) / job.sr * DF.FPS - 1e-9))
-            feats = audio_features.frame_features(job.samples, job.sr, DF.FPS, frames)
+            feats = job.features
+            if feats is None:
+                feats = song_features(job.samples, job.sr)
             x = self.stats.normalize_audio(feats.matrix())
         rng = np.random.default_rng(job.seed)
         start = self.stats.normalize_motion(self.start_poses[rng.integers(len(self.start_poses))])

@@ -150,3 +150,27 @@ def test_styles_lists_dance_genres(client):
     manifest = client.get("/v1/models").json()
     text = json.dumps(manifest)
     assert "dance-dwm" in text
+
+
+def test_a_dance_from_features_computed_once_is_the_dance_from_the_song(models_dir):
+    """An evaluation dances one song dozens of times from features it computed once: the
+    engine must make the same dance from them as from the song, and must use them."""
+    from service.engines.dance import DanceJob, song_features
+    from service.metrics import StageTimer
+    from training.eval_dance import load_engine
+
+    engine, _ = load_engine(models_dir)
+    samples, sr = soundfile.read(io.BytesIO(click_wav(3.0, bpm=120.0)), dtype="float32")
+    other, _ = soundfile.read(io.BytesIO(click_wav(3.0, bpm=75.0)), dtype="float32")
+
+    def dance(**features):
+        job = DanceJob(samples, sr, genre="waltz", seed=3, **features)
+        return engine.predict(job, StageTimer(engine.name))
+
+    plain, given = dance(), dance(features=song_features(samples, sr))
+    np.testing.assert_array_equal(given.motion.lrot, plain.motion.lrot)
+    np.testing.assert_array_equal(given.motion.lpos, plain.motion.lpos)
+    assert given.tempo == plain.tempo
+    elsewhere = dance(features=song_features(other, sr))
+    assert elsewhere.tempo != plain.tempo
+    assert not np.array_equal(elsewhere.motion.lrot, plain.motion.lrot)
