@@ -174,3 +174,34 @@ def test_a_dance_from_features_computed_once_is_the_dance_from_the_song(models_d
     elsewhere = dance(features=song_features(other, sr))
     assert elsewhere.tempo != plain.tempo
     assert not np.array_equal(elsewhere.motion.lrot, plain.motion.lrot)
+
+
+def test_the_bound_rollout_is_the_plain_loop_of_the_step_graph(models_dir):
+    """The rollout binds the step graph's inputs and outputs to buffers once, for speed;
+    its dance must be, bit for bit, the one a plain loop of ``session.run`` makes."""
+    from motion import dance_features as DF
+    from service.engines.dance import NOISE
+    from training.eval_dance import load_engine
+
+    engine, _ = load_engine(models_dir)
+    rng = np.random.default_rng(5)
+    frames = 40
+    code = np.abs(rng.standard_normal((frames, 16))).astype(np.float32)
+    genre = DF.genre_vector("tango")
+    start = rng.standard_normal(DF.MOTION_CHANNELS).astype(np.float32)
+
+    noise_rng = np.random.default_rng(9)
+    noise = (NOISE * noise_rng.standard_normal((frames, DF.MOTION_CHANNELS))).astype(np.float32)
+    noise[:, DF.CONTACTS] = 0.0
+    zeros = np.zeros((1, engine.hidden), np.float32)
+    feeds = {"genre": genre[None], "h1": zeros, "c1": zeros, "h2": zeros, "c2": zeros}
+    want, prev = [start], start[None]
+    for t in range(1, frames):
+        feeds["code"], feeds["prev"] = code[t : t + 1], prev + noise[t]
+        prev, feeds["h1"], feeds["c1"], feeds["h2"], feeds["c2"] = engine.sessions["step"].run(
+            None, feeds
+        )
+        want.append(prev[0])
+    got = engine.rollout(code, genre, start, 9)
+    np.testing.assert_array_equal(got, np.stack(want))
+    assert np.abs(got[1:] - start).max() > 1e-3  # it moved: the states were fed back
