@@ -119,7 +119,8 @@ def _power_frames(padded: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Power spectra ``(len(centres), N_FFT // 2 + 1)``, scaled so that a full-scale sine's
     bin is 1, of Hann windows centred on samples ``centres`` of the signal that
     :func:`_pad_for_centres` padded (so in ``padded`` the windows start at ``centres``)."""
-    windows = padded[centres[:, None] + np.arange(N_FFT)[None, :]] * _WINDOW
+    # rows of a strided view: the (frames, N_FFT) index array of a gather cost more than the copy
+    windows = np.lib.stride_tricks.sliding_window_view(padded, N_FFT)[centres] * _WINDOW
     spectrum = scipy.fft.rfft(windows, axis=1)
     return (spectrum.real**2 + spectrum.imag**2) / _POWER_SCALE
 
