@@ -194,8 +194,12 @@ def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk, film):
     entry = ED.export_bundle(model, stats, m[:4], tmp_path)
     checks = entry["metrics"]["parity_max_abs"]
     assert checks["steps"] == 100 and checks["step"] < 1e-4 and checks["audio"] < 1e-4
+    assert 1e-4 < checks["step_int8"] < ED.INT8_ATOL  # the listed step graph is the int8 one
+    import onnx
     import onnxruntime as ort
 
+    ops = {n.op_type for n in onnx.load(str(tmp_path / "dance" / "step.onnx")).graph.node}
+    assert "MatMulInteger" in ops and "Gemm" not in ops
     session = ort.InferenceSession(str(tmp_path / "dance" / "step.onnx"))
     shapes = {i.name: i.shape for i in session.get_inputs()}
     assert shapes["h1"] == ["batch", 48] and shapes["prev"] == ["batch", DF.MOTION_CHANNELS]

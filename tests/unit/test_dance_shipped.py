@@ -32,6 +32,7 @@ def test_manifest_entry_describes_the_bundle():
     assert {"audio", "step"} <= set(entry.graphs)
     checks = entry.metrics["parity_max_abs"]
     assert checks["steps"] >= 100 and checks["step"] < 1e-3 and checks["audio"] < 1e-3
+    assert checks["step_int8"] < entry.metrics["parity_int8_atol"]
     stats = DF.DanceStats.load(MODELS / extra["stats"])
     assert stats.audio_mean.shape == (DF.AUDIO_CHANNELS,)
     assert stats.motion_mean.shape == (DF.MOTION_CHANNELS,)
@@ -51,7 +52,7 @@ def test_shipped_graphs_match_the_checkpoint(tmp_path):
     if int(ckpt["step"]) != int(entry.metrics["steps"]):
         pytest.skip(f"checkpoint is at step {ckpt['step']}, the shipped model at "
                     f"{entry.metrics['steps']}")  # fmt: skip
-    figures = ED.parity(model, MODELS / ED.FOLDER, seed=1)  # raises outside tolerance
+    figures = ED.parity(model, MODELS / ED.FOLDER, seed=1, int8=True)  # raises outside tolerance
     assert figures["steps"] == ED.PARITY_STEPS >= 100
     shipped = DF.DanceStats.load(MODELS / entry.extra["stats"])
     np.testing.assert_array_equal(shipped.motion_mean, stats.motion_mean)
