@@ -160,8 +160,9 @@ def parity(
     runtimes' rounding (as it does the thread count's), and one network failed at step 76
     on a last-bit difference. Raises ``RuntimeError`` outside ``RTOL``/``ATOL`` (the step,
     when ``int8``, outside ``INT8_ATOL``)."""
-    step_rtol, step_atol = (0.0, INT8_ATOL) if int8 else (RTOL, ATOL)
     import onnxruntime as ort
+
+    step_rtol, step_atol = (0.0, INT8_ATOL) if int8 else (RTOL, ATOL)
 
     model.eval()
     gen = torch.Generator().manual_seed(seed)
@@ -229,8 +230,12 @@ def export_bundle(
         "training_data": TRAINING_DATA,
         "licence": LICENCE,
         "trained_at": trained_at,
-        "metrics": {**(metrics or {}), "parity_max_abs": checks, "parity_rtol": RTOL,
-                    "parity_int8_atol": INT8_ATOL},
+        "metrics": {
+            **(metrics or {}),
+            "parity_max_abs": checks,
+            "parity_rtol": RTOL,
+            "parity_int8_atol": INT8_ATOL,
+        },
         "extra": {
             "paper": "jacob2019 genre-based dance generation (audio -> FC -> 2 LSTM)",
             "stats": f"{FOLDER}/stats.npz",
