@@ -169,15 +169,18 @@ eval-dance: $(VENV)/.dev
 
 # A trial judged as the rules in docs/dance_alignment.md judge one, without touching models/:
 # DANCE_TRIAL=dir holding its fold-0 dance.pt and fold-1 dance-fold1.pt, exported to dir/models-*,
-# then the held-out songs of both folds (12 seeds) and every shared song whole, into dir/judged.json
+# then the held-out songs of both folds (12 seeds from DANCE_FIRST_SEED) and every shared song
+# whole, into dir/judged.json
 DANCE_TRIAL ?= runs/dance-trial
+DANCE_FIRST_SEED ?= 0
 judge-dance: $(VENV)/.dev
 	rm -rf $(DANCE_TRIAL)/models-f0 $(DANCE_TRIAL)/models-f1
 	$(PY) -m model_export.dance --checkpoint $(DANCE_TRIAL)/dance.pt --models-dir $(DANCE_TRIAL)/models-f0
 	$(PY) -m model_export.dance --checkpoint $(DANCE_TRIAL)/dance-fold1.pt \
 		--models-dir $(DANCE_TRIAL)/models-f1 --name dance-dwm-fold1
 	MOTION_MODELS_DIR=$(DANCE_TRIAL)/models-f0 $(PY) -m training.eval_dance --held-out-only \
-		--whole-songs --fold-models $(DANCE_TRIAL)/models-f1 --json $(DANCE_TRIAL)/judged.json
+		--whole-songs --fold-models $(DANCE_TRIAL)/models-f1 --first-seed $(DANCE_FIRST_SEED) \
+		--json $(DANCE_TRIAL)/judged.json
 
 show-dance: $(VENV)/.dev
 	$(PY) -m training.show_dance

@@ -1,7 +1,7 @@
 """Evaluation of the shipped dance model (jacob2019 made to work).
 
-    python -m training.eval_dance [--seeds 12] [--json PATH] [--quick] [--fold-models DIR]
-                                  [--held-out-only [--whole-songs]]
+    python -m training.eval_dance [--seeds 12] [--first-seed 0] [--json PATH] [--quick]
+                                  [--fold-models DIR] [--held-out-only [--whole-songs]]
 
 (``python -m model_export.evaluations PATH`` then records the report in the model's
 manifest entry.)
@@ -183,7 +183,7 @@ def any_level_f_measure(estimated: np.ndarray, reference: np.ndarray) -> float:
     return max(beat_tracking.beat_f_measure(estimated, c) for c in candidates)
 
 
-def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
+def generated_set(engine, seeds: int = 1, log=print, songs=None, first_seed: int = 0) -> dict:
     """The beat test set: tracker and dance per pattern and tempo."""
     from training.songs import beat_test_set
 
@@ -199,7 +199,7 @@ def generated_set(engine, seeds: int = 1, log=print, songs=None) -> dict:
             "downbeat_f": round(beat_tracking.beat_f_measure(feats.downbeats, song.downbeats), 3),
             "dances": [],
         }
-        for seed in range(seeds):
+        for seed in range(first_seed, first_seed + seeds):
             genre = DF.MUSIC_GENRES[(i + seed) % len(DF.MUSIC_GENRES)]
             if song.pattern == "waltz":  # a 3/4 song is danced as a waltz
                 genre = "waltz"
@@ -222,8 +222,8 @@ def reference_beats(samples: np.ndarray, sr: int, bpm: float) -> np.ndarray:
     return beat_tracking.track_beats(envelope, bpm=bpm)[1]
 
 
-def shared_songs(engine, log=print, names=None) -> dict:
-    """Every Dance with Melody song, whole, danced in its own genre (seed 0): its tempo
+def shared_songs(engine, log=print, names=None, seed: int = 0) -> dict:
+    """Every Dance with Melody song, whole, danced in its own genre (one seed): its tempo
     beside the song's danced (else librosa's) tempo (``training.dance_tempo``), alignment to
     the tracker's beats and to the beats at that reference tempo, beside shifted grids;
     stalls."""
@@ -241,7 +241,7 @@ def shared_songs(engine, log=print, names=None) -> dict:
         samples, sr = audio_decode.decode(folder / "audio.mp3")
         genre = DWM_GENRES[folder.name.split("_")[1]]
         feats = song_features(samples, sr)
-        job = DanceJob(samples, sr, genre=genre, features=feats)
+        job = DanceJob(samples, sr, genre=genre, seed=seed, features=feats)
         result = engine.predict(job, StageTimer(engine.name))
         playing = feats.playing  # the dance has the features' frames: the warp keeps them
         reference, how = reference_tempo(table[folder.name])
@@ -319,7 +319,7 @@ def halves_of(motion: Motion) -> list[tuple[str, Motion]]:
     return list(zip(DM.HALVES, (motion.slice(0, middle), motion.slice(middle, None)), strict=True))
 
 
-def held_out(engine, seeds: int, log=print, takes=None) -> dict:
+def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> dict:
     """Real and generated dances on the held-out songs: alignment (to the tracker's beats,
     and the generated dances' to the beats at the song's danced tempo too), genre
     recognition of every requested genre, foot sliding and contacts, the legs' jerk,
@@ -368,7 +368,7 @@ def held_out(engine, seeds: int, log=print, takes=None) -> dict:
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1), "tempo": round(tempo, 1),
                 "real": {"bas": round(score, 4), "chance": round(chance, 4)}}  # fmt: skip
-        for seed in range(seeds):
+        for seed in range(first_seed, first_seed + seeds):
             for asked in DF.MUSIC_GENRES:
                 job = DanceJob(samples, sr, genre=asked, seed=seed, features=feats)
                 out = engine.predict(job, StageTimer(engine.name)).motion
@@ -470,21 +470,23 @@ def require_disjoint_folds(entries: list) -> list[list[str]]:
     return takes
 
 
-def judge_folds(first: tuple, others: list[tuple], seeds: int, log, shared=None) -> dict:
+def judge_folds(
+    first: tuple, others: list[tuple], seeds: int, log, shared=None, first_seed: int = 0
+) -> dict:
     """``by_fold`` of the shipped model's held-out figures (``first``: engine, entry,
     pooling data, held_out report) and of each other fold's model (``others``: engine,
     entry), which is judged here on its own songs; each fold's songs also danced whole
     (stalls, the beats at the danced tempo), taken from ``shared`` where it has them."""
     folds = [first]
     for engine, entry in others:
-        part = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
+        part = held_out(engine, seeds, log, entry.extra.get("validation_takes"), first_seed)
         folds.append((engine, entry, part.pop("_pooling"), part))
     for engine, _, pooling, part in folds:
         names = list(part["songs"])
         if engine is first[0] and shared and all(n in shared for n in names):
             pooling["whole_songs"] = {n: shared[n] for n in names}
         else:
-            pooling["whole_songs"] = shared_songs(engine, log, names)
+            pooling["whole_songs"] = shared_songs(engine, log, names, first_seed)
     return by_fold([(entry, pooling, part) for _, entry, pooling, part in folds])
 
 
@@ -542,7 +544,9 @@ def genre_accuracy(confusion: dict[str, dict[str, int]]) -> dict:
     return {"all": round(hits / max(total, 1), 4), "per_genre": per, "confusion": confusion}
 
 
-def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict:
+def ten_minutes(
+    engine, music, real_speed: float, seeds: int, log=print, first_seed: int = 0
+) -> dict:
     """The held-out songs' music looped to ``TEN_MINUTES``, one generation per seed."""
 
     sr = music[0][1]
@@ -550,7 +554,7 @@ def ten_minutes(engine, music, real_speed: float, seeds: int, log=print) -> dict
     long_song = np.resize(loop, int(TEN_MINUTES * sr))
     feats = song_features(long_song, sr)
     per_seed = []
-    for seed in range(seeds):
+    for seed in range(first_seed, first_seed + seeds):
         job = DanceJob(long_song, sr, genre="waltz", seed=seed, features=feats)
         out = engine.predict(job, StageTimer(engine.name))
         per_seed.append({"seed": seed, "frames": out.motion.num_frames,
@@ -579,6 +583,7 @@ def evaluate(
     held_out_only: bool = False,
     whole_songs: bool = False,
     fold_models: list[Path] = (),
+    first_seed: int = 0,
 ) -> dict:
     """All parts: ``test_songs`` (default the whole beat test set) and ``shared_names``
     (default every shared song) narrow the first two; ``held_out_only`` runs only the
@@ -587,7 +592,8 @@ def evaluate(
     the held-out songs).
     ``fold_models``: model folders of the same recipe trained with other songs held out;
     each is judged on its own held-out songs, and ``folds`` reports every fold and all of
-    them pooled."""
+    them pooled. Every part dances seeds ``first_seed`` onwards (another draw of the same
+    judge: two models compared on seeds neither was chosen on)."""
     engine, entry = load_engine()
     others = [load_engine(folder) for folder in fold_models]
     require_disjoint_folds([entry, *(e for _, e in others)])
@@ -596,22 +602,24 @@ def evaluate(
         "model_name": entry.name,
         "model_version": entry.version,
         "seeds": seeds,
+        "first_seed": first_seed,
         "machine": measuring_machine(),
         "measured": time.strftime("%Y-%m-%d"),
     }
     if not held_out_only:
-        report["generated_set"] = generated_set(engine, 1, log, test_songs)
+        report["generated_set"] = generated_set(engine, 1, log, test_songs, first_seed)
     if not held_out_only or whole_songs:
-        report["shared_songs"] = shared_songs(engine, log, names=shared_names)
-    held = held_out(engine, seeds, log, takes=entry.extra.get("validation_takes"))
+        report["shared_songs"] = shared_songs(engine, log, shared_names, first_seed)
+    held = held_out(engine, seeds, log, entry.extra.get("validation_takes"), first_seed)
     music, real_speed = held.pop("_music"), held.pop("_real_speed")
     pooling = held.pop("_pooling")
     report.update(held)
     if others:
         first = (engine, entry, pooling, held)
-        report["folds"] = judge_folds(first, others, seeds, log, report.get("shared_songs"))
+        shared = report.get("shared_songs")
+        report["folds"] = judge_folds(first, others, seeds, log, shared, first_seed)
     if not held_out_only:
-        report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log)
+        report["ten_minutes"] = ten_minutes(engine, music, real_speed, seeds, log, first_seed)
     return report
 
 
@@ -763,9 +771,11 @@ def _held_out_lines(report: dict) -> list[str]:
             ),
         ]
     ba, pfc = report["beat_alignment"], report["foot_contact_score"]
+    first = report.get("first_seed", 0)
+    seeds = f"{report['seeds']} seeds" + (f" from seed {first}" if first else "")
     lines += [
         "",
-        f"Held-out songs ({len(report['songs'])} x {report['seeds']} seeds, the part the real "
+        f"Held-out songs ({len(report['songs'])} x {seeds}, the part the real "
         "dance covers; against the tracker's beats at the level of the song's genre):",
         "",
         "| dance | beat alignment | chance (shifted beats) | foot sliding (cm/s) "
@@ -826,6 +836,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--seeds", type=int, default=SEEDS, help="dance seeds per held-out song and genre"
     )
+    p.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="the first dance seed: two models compared on seeds neither was chosen on",
+    )
     p.add_argument("--json", type=Path, default=None)
     p.add_argument(
         "--quick",
@@ -859,7 +875,8 @@ def main(argv: list[str] | None = None) -> int:
         report = evaluate(1, test_songs=songs, shared_names=list(VAL_TAKES))
     else:
         report = evaluate(args.seeds, held_out_only=args.held_out_only,
-                          whole_songs=args.whole_songs, fold_models=args.fold_models)  # fmt: skip
+                          whole_songs=args.whole_songs, fold_models=args.fold_models,
+                          first_seed=args.first_seed)  # fmt: skip
     publish(report, markdown(report), args.json)
     return 0
 

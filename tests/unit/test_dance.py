@@ -209,6 +209,30 @@ def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk, film):
     assert session.run(None, feeds)[0].shape == (3, DF.MOTION_CHANNELS)
 
 
+def test_evaluation_dances_from_its_first_seed():
+    """``first_seed`` draws other dances of the same judge: seed k, with the genre the seed
+    rotates to, as a request with that seed would dance it."""
+    from motion import beat_warp as BW
+    from service.engines.dance import DanceJob
+    from service.metrics import StageTimer
+    from training import eval_dance as ED
+    from training.songs import beat_song
+
+    engine, _ = ED.load_engine()
+    song = beat_song("four_on_the_floor", 120.0, seconds=12.0)
+
+    def dances(first_seed: int) -> list[dict]:
+        report = ED.generated_set(engine, 1, lambda *_: None, [song], first_seed)
+        return report["songs"][0]["dances"]
+
+    (first,), (later,) = dances(0), dances(5)
+    assert first["genre"] == DF.MUSIC_GENRES[0] and later["genre"] == DF.MUSIC_GENRES[1]
+    job = DanceJob(song.samples, song.sr, genre=later["genre"], seed=5)
+    out = engine.predict(job, StageTimer(engine.name)).motion
+    score, _ = BW.alignment(out, song.beats)
+    assert later["bas"] == round(score, 4) != first["bas"]
+
+
 def test_evaluation_energy_blocks_are_whole_30_second_blocks():
     from training import eval_dance as ED
 
