@@ -61,7 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion import audio_decode, beat_tracking, spectral
+from motion import anatomy, audio_decode, beat_tracking, spectral
 from motion import beat_warp as BW
 from motion import contacts as CT
 from motion import dance_features as DF
@@ -338,7 +338,12 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
     by_half = {h: {m: {"real": [], "generated": []} for m in ("sliding", "contact", "legs_jerk")}
                for h in DM.HALVES}  # fmt: skip
 
+    hinges = {k: {"frames": 0, "knees": 0, "elbows": 0} for k in ("real", "generated")}
+
     def feet(kind: str, motion: Motion) -> None:
+        hinges[kind]["frames"] += motion.num_frames
+        hinges[kind]["knees"] += int(anatomy.knees_backwards(motion).sum())
+        hinges[kind]["elbows"] += int(anatomy.elbows_backwards(motion).sum())
         sliding[kind].append(CT.canonical_foot_sliding(motion))
         contact[kind].append(DM.physical_foot_contact(motion))
         for h, part in halves_of(motion):
@@ -429,6 +434,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
             "confusion": confusion,
             "by_half": {half: genre_accuracy(c) for half, c in halves.items()},
         },
+        "hinges_backwards": hinges_backwards(hinges),
         "_music": [(h[3], h[4]) for h in held],
         "_real_speed": float(np.mean([body_speed(h[2]).mean() for h in held])),
         "_pooling": {
@@ -436,7 +442,21 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
             "sliding": sliding,
             "contact": contact,
             "legs_jerk": {h: m["legs_jerk"] for h, m in by_half.items()},
+            "hinges": hinges,
         },
+    }
+
+
+def hinges_backwards(counts: dict) -> dict:
+    """Shares of frames with a knee or an elbow bent backwards (``motion.anatomy``), of the
+    real dances and of every generated one, from frame counts per kind."""
+    return {
+        kind: {
+            "frames": c["frames"],
+            "knees": round(c["knees"] / max(c["frames"], 1), 5),
+            "elbows": round(c["elbows"] / max(c["frames"], 1), 5),
+        }
+        for kind, c in counts.items()
     }
 
 
@@ -525,6 +545,9 @@ def by_fold(folds: list[tuple]) -> dict:
         "foot_sliding_cm_s": feet["sliding"],
         "foot_contact_score": feet["contact"],
         "legs_jerk_m_s3": legs_jerk,
+        "hinges_backwards": hinges_backwards({k: {m: sum(p["hinges"][k][m] for _, p, _ in folds)
+                                                   for m in ("frames", "knees", "elbows")}
+                                               for k in ("real", "generated")}),
         "songs_on_the_beat": sum(r["songs_on_the_beat"] for r in rows),
         "whole_songs": whole_song_figures({n: w for _, p, _ in folds
                                            for n, w in p["whole_songs"].items()}),
@@ -704,8 +727,12 @@ def _folds_lines(folds: dict | None) -> list[str]:
         )
     jerks = "; ".join(f"{h} half {v['generated']:.0f} / {v['real']:.0f}"
                       for h, v in pooled["legs_jerk_m_s3"].items())  # fmt: skip
-    return [*lines, "", f"Pooled legs' jerk (m/s³), generated / real: {jerks}.", "",
-            "Pooled:", "", *DM.distance_table(pooled["feature_distances"])]  # fmt: skip
+    hinges = pooled["hinges_backwards"]
+    bent = "; ".join(f"{j} {hinges['generated'][j]:.2%} / {hinges['real'][j]:.2%}"
+                     for j in ("knees", "elbows"))  # fmt: skip
+    return [*lines, "", f"Pooled legs' jerk (m/s³), generated / real: {jerks}.",
+            f"Frames with a hinge bent backwards (motion.anatomy), generated / real: {bent}.",
+            "", "Pooled:", "", *DM.distance_table(pooled["feature_distances"])]  # fmt: skip
 
 
 def markdown(report: dict) -> str:
