@@ -25,6 +25,7 @@ from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
+from motion.anatomy import hinged
 from motion.skeleton import Motion
 from service import limits
 from service.clips import Clip, Result, answer_format, load_clip, write_result
@@ -245,8 +246,8 @@ class DanceEngine(Engine):
         self, job: DanceJob, music: Music, out: DanceNetworks, timer: StageTimer
     ) -> DanceResult:
         """The rolled-out poses -> a canonical dance at 30 fps: low-passed, standstills
-        filled, root integrated, feet cleaned up, its kinematic beats warped onto the music's
-        pulses; and its beat alignment."""
+        filled, root integrated, knees and elbows bent only the way they bend, feet cleaned
+        up, its kinematic beats warped onto the music's pulses; and its beat alignment."""
         warnings: list[str] = []
         if job.genre is None:
             p = out.genre_probs[out.genre]
@@ -258,6 +259,8 @@ class DanceEngine(Engine):
         with timer.stage("motion"):
             raw = DF.smooth_features(self.stats.denormalize_motion(out.poses))
             x, motion = DF.keep_moving(raw, music.playing)
+        with timer.stage("anatomy"):  # the clean-up's IK bends each knee the way it finds it
+            motion = hinged(motion)
         if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
             with timer.stage("foot_cleanup"):
                 motion = dance_feet.clean_feet(motion, x[:, DF.CONTACTS] > 0.5)
