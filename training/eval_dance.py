@@ -340,7 +340,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
 
     hinges = {k: {"frames": 0, "knees": 0, "elbows": 0} for k in ("real", "generated")}
 
-    def feet(kind: str, motion: Motion) -> None:
+    def limbs(kind: str, motion: Motion) -> None:  # feet, knees and elbows
         hinges[kind]["frames"] += motion.num_frames
         hinges[kind]["knees"] += int(anatomy.knees_backwards(motion).sum())
         hinges[kind]["elbows"] += int(anatomy.elbows_backwards(motion).sum())
@@ -368,7 +368,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
         known = reference_beats(samples, sr, reference_tempo(table[name])[0])
         score, chance = BW.alignment(real, beats)
         rows["real"].append((score, chance))
-        feet("real", real)
+        limbs("real", real)
         legs_jerk("real", real)
         real_hits.append(genre_clf.predict(genre_features(real)) == genre)
         song = {"genre": genre, "seconds": round(len(samples) / sr, 1), "tempo": round(tempo, 1),
@@ -385,7 +385,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
                 for half, piece in zip(DM.HALVES, (out.slice(0, middle), out.slice(middle)),
                                        strict=True):  # fmt: skip
                     halves[half][asked][genre_clf.predict(genre_features(piece))] += 1
-                feet("generated", out)
+                limbs("generated", out)
                 if asked != genre:
                     continue
                 generated_dances.setdefault(name, []).append(out)
