@@ -34,6 +34,7 @@ from torch import nn
 
 from model_export import manifest as MF
 from motion import dance_features as DF
+from service.engines.dance import STATES  # the step graph's state names, one contract
 from training import dance as TD
 
 OPSET = 17
@@ -48,7 +49,6 @@ TRAINING_DATA = [
     "CMU Graphics Lab Motion Capture Database, salsa / Indian / modern dance takes (CMU terms)",
 ]
 LICENCE = "research and evaluation only (Dance with Melody has no licence; its music is commercial)"
-STATE_NAMES = ("h1", "c1", "h2", "c2")
 
 
 class AudioGraph(nn.Module):
@@ -102,8 +102,8 @@ def export_graphs(model: TD.DanceNet, out: Path) -> None:
         {"audio": {0: "batch", 1: "time"}, "code": {0: "batch", 1: "time"},
          "genre_probs": {0: "batch"}},
     )  # fmt: skip
-    step_inputs = ["code", "genre", "prev", *STATE_NAMES]
-    step_outputs = ["pose", *(f"{n}_out" for n in STATE_NAMES)]
+    step_inputs = ["code", "genre", "prev", *STATES]
+    step_outputs = ["pose", *(f"{n}_out" for n in STATES)]
     zeros = torch.zeros(1, hidden)
     _export(
         StepGraph(model),
@@ -118,7 +118,7 @@ def export_graphs(model: TD.DanceNet, out: Path) -> None:
 
 def graph_specs(model: TD.DanceNet) -> dict:
     hidden, code = model.config.hidden, model.config.code
-    states = [(n, ["batch", hidden]) for n in STATE_NAMES]
+    states = [(n, ["batch", hidden]) for n in STATES]
     return {
         "audio": MF.graph_spec(
             f"{FOLDER}/audio.onnx",
@@ -187,7 +187,7 @@ def parity(
     worst_step = 0.0
     for t in range(steps):
         feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_t.numpy()}
-        feeds.update({n: s.numpy() for n, s in zip(STATE_NAMES, state_t, strict=True)})
+        feeds.update({n: s.numpy() for n, s in zip(STATES, state_t, strict=True)})
         got = step.run(None, feeds)
         with torch.no_grad():
             prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
