@@ -9,6 +9,9 @@ upper arm (its +Z component >= -0.007): the knee flexes about the thigh's X axis
 elbow about the upper arm's Y axis, one way only. :func:`hinged` turns a bend the wrong
 way back to straight about that axis, keeping the bone's twist and its sideways part.
 
+A leg IK can also swing a knee behind its leg with the hinge itself intact (the leg turned
+about its hip-ankle line): :func:`knees_forward` turns it back, the foot held.
+
 Measures: :func:`knees_backwards` (the knee behind the hip-ankle line, against the body's
 facing) and :func:`elbows_backwards` (the elbow off the shoulder-wrist line on the side
 its forearm flexes toward, in the upper arm's own frame); neither finds a frame in
@@ -25,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d, label, maximum_filter1d, minimum_filter1d
 
 from motion import canonical as C
 from motion import kinematics as K
@@ -50,6 +53,8 @@ ELBOWS = ("LowerArm_L", "LowerArm_R")
 BACKWARDS_SHARE = 0.02
 BENT_DEGREES = 15.0
 SPEED_LIMIT = 7.0  # body heights a second: a result's fastest joint (real Bandai's: 6.85)
+SWIVEL_BLEND_SECONDS = 0.2  # how far either side of a swivelled knee the swivel fades
+SWIVEL_TOLERANCE = BACKWARDS_SHARE / 2  # how far behind its line a knee may stay
 SPIKE_REACH = 4  # frames a side :func:`despiked` may bridge over (0.13 s at 30 fps)
 
 
@@ -110,6 +115,54 @@ def knees_backwards(motion: Motion) -> np.ndarray:
         off, bent = _off_line(gpos, f"UpperLeg_{side}", f"LowerLeg_{side}", f"Foot_{side}")
         out |= bent & (np.einsum("fi,fi->f", off, forward) < -BACKWARDS_SHARE * C.body_height())
     return out
+
+
+def knees_forward(motion: Motion, blend_seconds: float = SWIVEL_BLEND_SECONDS) -> Motion:
+    """A canonical motion with every bent knee swivelled out of the way :func:`knees_backwards`
+    measures: where a knee lies further than :data:`SWIVEL_TOLERANCE` of body height behind
+    its hip-ankle line (against the body's facing), the whole leg turns about that line by
+    the least angle that brings it within, the swivel an animator uses. The ankle's position
+    and the foot's global rotation stay (contacts hold), and so does the knee's bend; the
+    angle is spread over ``blend_seconds`` either side, so the leg does not pop. Frames that
+    need nothing near them stay bit for bit."""
+    C.check_motion(motion, "the knee swivel")
+    parents = motion.skeleton.parents
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    forward = K.facing_directions(gpos, *FACING_JOINTS)
+    reach = max(1, int(round(blend_seconds * motion.fps)))
+    lrot = motion.lrot.copy()
+    for side in "LR":
+        hip, knee, foot = (C.INDEX[f"{n}_{side}"] for n in ("UpperLeg", "LowerLeg", "Foot"))
+        off, bent = _off_line(gpos, f"UpperLeg_{side}", f"LowerLeg_{side}", f"Foot_{side}")
+        line = gpos[:, foot] - gpos[:, hip]
+        axis = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-9)
+        ahead = forward - np.einsum("fi,fi->f", forward, axis)[:, None] * axis
+        across = np.cross(axis, ahead)
+        phi = np.arctan2(np.einsum("fi,fi->f", off, across), np.einsum("fi,fi->f", off, ahead))
+        # behind by at most SWIVEL_TOLERANCE: cos(phi) >= -tolerance / (|off| |ahead|)
+        scale = np.linalg.norm(off, axis=-1) * np.linalg.norm(ahead, axis=-1)
+        least = -np.minimum(SWIVEL_TOLERANCE * C.body_height() / np.maximum(scale, 1e-9), 1.0)
+        wrong = bent & (np.cos(phi) < least)
+        if not wrong.any():
+            continue
+        # Knees behind on either side of straight back turn out to one side per stretch
+        # (the side most of its frames are on), so the swivel never flips the knee across.
+        runs, count = label(maximum_filter1d(wrong, 4 * reach + 1))
+        toward = np.ones(len(phi))
+        for run in range(1, count + 1):
+            here = runs == run
+            toward[here] = 1.0 if np.sin(phi[here & wrong]).sum() >= 0.0 else -1.0
+        on_side = np.where(np.sign(phi) == toward, phi, phi + toward * 2 * np.pi)
+        need = np.where(wrong, toward * np.arccos(least) - on_side, 0.0)  # of sign -toward
+        spread = gaussian_filter1d(maximum_filter1d(np.abs(need), 2 * reach + 1), reach / 2)
+        turn = -toward * np.maximum(spread, np.abs(need))
+        moved = np.abs(turn) > 1e-6
+        q = R.from_rotvec(axis[moved] * turn[moved, None])
+        thigh = R.mul(q, grot[moved, hip])
+        lrot[moved, hip] = R.mul(R.inv(grot[moved, int(parents[hip])]), thigh)
+        shin = R.mul(q, grot[moved, knee])
+        lrot[moved, foot] = R.mul(R.inv(shin), grot[moved, foot])
+    return motion.replace(lrot=lrot)
 
 
 def elbows_backwards(motion: Motion) -> np.ndarray:

@@ -25,7 +25,7 @@ from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
 from motion import dance_features as DF
 from motion import kinematics as K
-from motion.anatomy import hinged
+from motion.anatomy import hinged, knees_forward
 from motion.skeleton import Motion
 from service import limits
 from service.clips import Clip, Result, answer_format, load_clip, write_result
@@ -247,7 +247,8 @@ class DanceEngine(Engine):
     ) -> DanceResult:
         """The rolled-out poses -> a canonical dance at 30 fps: low-passed, standstills
         filled, root integrated, knees and elbows bent only the way they bend, feet cleaned
-        up, its kinematic beats warped onto the music's pulses; and its beat alignment."""
+        up, knees the clean-up swung behind the leg swivelled forward, its kinematic beats
+        warped onto the music's pulses; and its beat alignment."""
         warnings: list[str] = []
         if job.genre is None:
             p = out.genre_probs[out.genre]
@@ -264,6 +265,8 @@ class DanceEngine(Engine):
         if job.foot_cleanup:  # before the warp, which keeps still feet still and sets the timing
             with timer.stage("foot_cleanup"):
                 motion = dance_feet.clean_feet(motion, x[:, DF.CONTACTS] > 0.5)
+            with timer.stage("knees"):  # its leg IK can swing a knee behind the leg
+                motion = knees_forward(motion)
         if job.beat_warp and len(beats) >= 2:
             with timer.stage("beat_warp"):
                 motion = BW.warp_to_beats(motion, pulses).motion

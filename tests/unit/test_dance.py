@@ -237,7 +237,8 @@ def test_shipped_dances_bend_knees_and_elbows_forward():
     """The foot clean-up's IK bends each knee the way it finds it bent, and the network
     overstretches a few: served rumbas and cha-chas had a knee backwards in 7 % of frames
     on these songs (real dances: none) and an elbow in 0.6 %, before the hinges were kept
-    ahead of the clean-up."""
+    ahead of the clean-up; then 1.1 % of knees, swung behind the leg by the IK, until the
+    knees were swivelled forward after it."""
     from motion import anatomy
     from service.engines.dance import DanceJob
     from service.metrics import StageTimer
@@ -255,7 +256,7 @@ def test_shipped_dances_bend_knees_and_elbows_forward():
                 frames += out.num_frames
                 knees += int(anatomy.knees_backwards(out).sum())
                 elbows += int(anatomy.elbows_backwards(out).sum())
-    assert knees / frames < 0.02 and elbows / frames < 0.002
+    assert knees / frames < 0.001 and elbows / frames < 0.002
 
 
 def test_evaluation_energy_blocks_are_whole_30_second_blocks():

@@ -158,6 +158,39 @@ def test_a_knee_bent_the_wrong_way_is_seen_and_straightened(bandai):
     assert not anatomy.knees_backwards(fixed).any()
 
 
+def test_a_knee_swung_behind_its_leg_is_swivelled_forward_with_the_foot_held(walk):
+    """What a leg IK can do to a bent knee (the hinge itself fine): the leg turned about its
+    hip-ankle line until the knee points back. The swivel turns it forward again without
+    moving the ankle, the foot or the bend, and leaves the other frames alone."""
+    walk = walk.replace(lrot=np.tile(walk.lrot, (3, 1, 1)), lpos=np.tile(walk.lpos, (3, 1, 1)))
+    grot, gpos = K.fk(walk.lrot, walk.lpos, walk.skeleton.parents)
+    hip, knee, foot = (C.INDEX[n] for n in ("UpperLeg_L", "LowerLeg_L", "Foot_L"))
+    turned = np.zeros(walk.num_frames, dtype=bool)
+    turned[40:50] = True
+    line = gpos[turned, foot] - gpos[turned, hip]
+    q = R.from_rotvec(np.pi * line / np.linalg.norm(line, axis=-1, keepdims=True))
+    lrot = walk.lrot.copy()
+    parent = int(walk.skeleton.parents[hip])
+    lrot[turned, hip] = R.mul(R.inv(grot[turned, parent]), R.mul(q, grot[turned, hip]))
+    lrot[turned, foot] = R.mul(R.inv(R.mul(q, grot[turned, knee])), grot[turned, foot])
+    swung = walk.replace(lrot=lrot)
+    assert not anatomy.knees_backwards(walk).any()
+    assert anatomy.knees_backwards(swung)[turned].sum() >= 5
+
+    fixed = anatomy.knees_forward(swung)
+    assert not anatomy.knees_backwards(fixed).any()
+    grot_f, gpos_f = K.fk(fixed.lrot, fixed.lpos, fixed.skeleton.parents)
+    feet = [C.INDEX[n] for n in ("Foot_L", "Toes_L", "Foot_R", "Toes_R")]
+    assert np.abs(gpos_f[:, feet] - gpos[:, feet]).max() < 1e-6 * H
+    assert np.abs(np.abs(np.einsum("fji,fji->fj", grot_f[:, feet], grot[:, feet])) - 1).max() < 1e-9
+    np.testing.assert_array_equal(fixed.lrot[:, knee], walk.lrot[:, knee])  # the bend stays
+    untouched = np.ones(walk.num_frames, dtype=bool)
+    untouched[40 - 20 : 50 + 20] = False  # the swivel fades in and out over 0.2 s (+ tails)
+    np.testing.assert_array_equal(fixed.lrot[untouched], walk.lrot[untouched])
+    assert anatomy.knees_forward(walk) is not walk  # a new motion, the same poses
+    np.testing.assert_array_equal(anatomy.knees_forward(walk).lrot, walk.lrot)
+
+
 def test_an_elbow_bent_the_wrong_way_is_seen_and_a_flexed_one_is_not(bandai):
     def elbows_at(degrees: float):
         lrot = bandai.lrot.copy()
