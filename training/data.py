@@ -148,6 +148,10 @@ def read_clips(path: Path) -> list[Clip]:
 
 
 def _cached(name: str, sources: list[Path], build) -> list[Clip]:
+    if not sources:
+        raise FileNotFoundError(
+            f"no {name} data under {data_dir()}: set MOTION_DATA_DIR to the data folder"
+        )
     return cached_by(name, _fingerprint(sources), build)
 
 

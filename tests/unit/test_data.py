@@ -181,3 +181,13 @@ def test_two_processes_building_one_cache_at_once_both_finish(tmp_path):
     assert [w.exitcode for w in workers] == [0, 0]
     assert [c.name for c in data.read_clips(path)] == [f"take{k}" for k in range(4)]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shared.npz"]
+
+
+def test_a_missing_data_folder_is_named_not_a_numpy_error(tmp_path, monkeypatch):
+    from training import data as D
+
+    monkeypatch.setenv("MOTION_DATA_DIR", str(tmp_path / "nowhere"))
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    for load in (D.load_cmu_dance, D.load_dance_with_melody, lambda: D.load_bvh_folder("xia")):
+        with pytest.raises(FileNotFoundError, match="MOTION_DATA_DIR"):
+            load()
