@@ -6,7 +6,8 @@
 
     GAME OPTIONS: --keep-timing (no time warp: as many frames as sent), --root-motion
     keep|in_place, --loop auto|true|false (whether the clip is a cycle to keep looping)
-    motion-style dance SONGS... [--genre G] [--skeleton RIG] [--fps N] --url URL -o DIR
+    motion-style dance SONGS... [--genre G] [--skeleton RIG] [--fps N]
+                         [--root-motion keep|in_place] --url URL -o DIR
 
 A folder stands for the clips (or songs) in it and below it; each result is written under
 DIR with the input's name (and its path below the folder), the extension of what came
@@ -263,6 +264,8 @@ def build_request(args: argparse.Namespace) -> Request:
         fields["genre"] = args.genre
     if args.seed is not None:
         fields["seed"] = str(args.seed)
+    if args.root_motion:
+        fields["root_motion"] = args.root_motion
     extra = {}
     if args.skeleton:
         rig = Path(args.skeleton)
@@ -296,17 +299,20 @@ def parser() -> argparse.ArgumentParser:
         sub.add_argument("--format", choices=("bvh", "glb", "fbx", "json"), help="answer format")
         sub.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
+    def root_motion(sub: argparse.ArgumentParser) -> None:
+        sub.add_argument(
+            "--root-motion",
+            choices=("keep", "in_place"),
+            help="keep the travel (the service's default) or hold the hips in place",
+        )
+
     def game(sub: argparse.ArgumentParser) -> None:
         sub.add_argument(
             "--keep-timing",
             action="store_true",
             help="no time warp: the result has the clip's frames and length",
         )
-        sub.add_argument(
-            "--root-motion",
-            choices=("keep", "in_place"),
-            help="keep the travel (the service's default) or hold the hips in place",
-        )
+        root_motion(sub)
         sub.add_argument(
             "--loop",
             choices=("auto", "true", "false"),
@@ -336,6 +342,7 @@ def parser() -> argparse.ArgumentParser:
     dance.add_argument("--skeleton", help="BVH, GLB or FBX rig to dance on")
     dance.add_argument("--fps", type=float, default=30.0, help="frame rate (30)")
     dance.add_argument("--seed", type=int, help="random seed")
+    root_motion(dance)
     return top
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from service.clips import Clip, GameOptions, Upload, load_clip
+from service.clips import Clip, GameOptions, RootMotion, Upload, load_clip
 from service.config import Settings
 from service.metrics import StageTimer
 from service.registered_styles import RegisteredStyle
@@ -143,7 +143,8 @@ class StylizeRequest:
 @dataclass
 class DanceRequest:
     """``POST /v1/dance``: music, an optional genre (predicted when None), a seed, an
-    optional skeleton to retarget onto and the frame rate of the answer."""
+    optional skeleton to retarget onto, the frame rate of the answer and its root motion
+    (keep the travel across the floor, or in_place)."""
 
     audio: Upload
     genre: str | None = None
@@ -152,3 +153,4 @@ class DanceRequest:
     fps: float = 30.0
     mapping: dict[str, str] | None = None
     format: str | None = None  # of the answer; None: the skeleton's, BVH without one
+    root_motion: RootMotion = "keep"

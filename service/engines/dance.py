@@ -16,19 +16,21 @@ and ``finish``) and the evaluations call the same one.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
 
 from motion import audio_decode, audio_features, dance_feet
 from motion import beat_warp as BW
+from motion import canonical as C
 from motion import dance_features as DF
 from motion import kinematics as K
 from motion.anatomy import hinged, knees_forward
+from motion.root_motion import in_place
 from motion.skeleton import Motion
 from service import limits
-from service.clips import Clip, Result, answer_format, load_clip, write_result
+from service.clips import Clip, Result, RootMotion, answer_format, load_clip, write_result
 from service.engines import register_engine
 from service.engines.base import Engine
 from service.metrics import StageTimer
@@ -56,6 +58,7 @@ class DanceJob:
     fps: float = DF.FPS
     frames: int = 0  # of the answer at ``fps``
     format: str | None = None  # of the answer, as asked
+    root_motion: RootMotion = "keep"  # of the answer: in_place takes the travel out
 
 
 @dataclass
@@ -194,7 +197,8 @@ class DanceEngine(Engine):
                 rest_if_unanimated=True,
             )
         return DanceJob(samples, sr, request.genre, request.seed, clip=clip,
-                        fps=float(request.fps), frames=frames, format=request.format)  # fmt: skip
+                        fps=float(request.fps), frames=frames, format=request.format,
+                        root_motion=request.root_motion)  # fmt: skip
 
     def _music(self, job: DanceJob, timer: StageTimer) -> Music:
         with timer.stage("features"):
@@ -225,13 +229,18 @@ class DanceEngine(Engine):
     def finish(self, job: DanceJob, result: DanceResult, timer: StageTimer) -> Result:
         with timer.stage("resample"):
             canon = K.resample_count(result.motion, job.fps, job.frames)
+        clip = job.clip
+        if clip is not None:  # taken out on the rig, where its root motion lives
+            clip = replace(clip, root_motion=job.root_motion)
+        elif job.root_motion == "in_place":
+            canon = in_place(canon, C.INDEX["Hips"])
         warnings = list(result.warnings)
         warnings.append(
             f"beat alignment {result.bas:.2f} (chance {result.bas_chance:.2f}) at "
             f"{result.tempo:.0f} bpm"
         )
         return write_result(  # on the rig's own skeleton, if any, at the requested rate
-            job.clip,
+            clip,
             canon,
             self.settings,
             timer,

@@ -8,6 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, File, Form, Request, Response, UploadFile
 
 from motion import dance_features as DF
+from service.clips import RootMotion
 from service.deps import DataPlaneDep, SettingsDep
 from service.errors import InvalidRequest
 from service.requests import DanceRequest
@@ -56,6 +57,13 @@ async def create_dance(
     fps: Annotated[float, Form(gt=0, le=MAX_FPS)] = 30.0,
     mapping: MappingField = None,
     format: FormatQuery = None,  # noqa: A002
+    root_motion: Annotated[
+        RootMotion,
+        Form(
+            description="keep the dance's travel across the floor, or in_place: the hips "
+            "held over one spot (vertical bob and facing kept)"
+        ),
+    ] = "keep",
 ) -> Response:
     rig = None
     if isinstance(skeleton, str):
@@ -73,6 +81,7 @@ async def create_dance(
         fps=fps,
         mapping=parse_mapping(mapping),
         format=format,
+        root_motion=root_motion,
     )
     result = await plane.infer("dance", job, endpoint=answers.route_template(request))
     return answers.respond(result, upload_name=audio.filename)

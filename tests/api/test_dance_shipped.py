@@ -17,6 +17,7 @@ from motion import retarget as R
 from service.config import Settings
 from service.main import create_app
 from service.manifest import load_manifest
+from tests.api.helpers import assert_problem
 from tests.rigs import FIXTURE
 from training.songs import encoded, song
 
@@ -114,3 +115,29 @@ def test_whole_song_dance_on_a_requested_skeleton(shipped):
     assert out.num_frames == math.ceil(len(samples) / sr * 24 - 1e-9)
     # the rig dances the whole song too
     assert_never_freezes(window_speeds(R.to_canonical(out)))
+
+
+def test_a_dance_in_place_holds_its_hips_over_one_spot_and_keeps_the_bob(shipped):
+    """``root_motion=in_place``, as the restyling routes take it, on the canonical skeleton
+    and on a rig: the travel across the floor taken out, everything else kept."""
+    data = encoded(song(40.0, bpm=120.0, seed=5), "WAV")
+    for rig in (None, FIXTURE.read_bytes()):
+        files = {"audio": ("song.wav", data, "audio/wav")}
+        if rig is not None:
+            files["skeleton"] = ("rig.bvh", rig, "text/plain")
+        dances = {}
+        for mode in ("keep", "in_place"):
+            r = shipped.post("/v1/dance", files=files, data={"seed": "2", "root_motion": mode})
+            assert r.status_code == 200, r.text[:500]
+            dances[mode] = bvh.loads(r.text)
+        kept, still = dances["keep"], dances["in_place"]
+        found = R.make_rig(kept.skeleton, kept)
+        hips = found.mapping["Hips"]
+        travel = np.ptp(K.global_positions(still)[:, hips, [0, 2]], axis=0).max()
+        assert travel < 0.02 * found.height, travel
+        assert np.ptp(K.global_positions(kept)[:, hips, [0, 2]], axis=0).max() > 0.3 * found.height
+        bob = K.global_positions(still)[:, hips, 1]
+        assert np.allclose(bob, K.global_positions(kept)[:, hips, 1], atol=1e-4 * found.height)
+        np.testing.assert_allclose(still.lrot, kept.lrot, atol=1e-6)  # the dance itself kept
+    bad = shipped.post("/v1/dance", files=files, data={"root_motion": "in-place"})
+    assert "root_motion" in assert_problem(bad, 400)["detail"]

@@ -17,6 +17,8 @@ import pytest
 import soundfile
 
 from motion import bvh
+from motion import canonical as C
+from motion import kinematics as K
 from tests.rigs import load_fixture, variants
 from tests.server import ServerProcess
 from training.songs import SR, song
@@ -90,6 +92,21 @@ def test_stylize_and_dance_write_beside_each_name(server, mixed_rigs, tmp_path):
         dance = bvh.load(tmp_path / "dance" / f"song{k}.bvh")
         assert dance.fps == pytest.approx(24) and dance.num_frames == round(seconds * 24)
         assert dance.skeleton.names == bvh.load(rig).skeleton.names
+
+
+def test_a_dance_in_place_reaches_the_service(server, tmp_path):
+    songs = tmp_path / "songs"
+    songs.mkdir()
+    soundfile.write(songs / "song.wav", song(20.0, seed=4), SR)
+    travel = {}
+    for mode in ("keep", "in_place"):
+        result = motion_style("dance", str(songs), "--root-motion", mode, "--seed", "2",
+                              "--url", server.url, "-o", str(tmp_path / mode), "-q")  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        dance = bvh.load(tmp_path / mode / "song.bvh")
+        hips = K.global_positions(dance)[:, C.INDEX["Hips"]][:, [0, 2]]
+        travel[mode] = np.ptp(hips, axis=0).max() / C.body_height()
+    assert travel["in_place"] < 0.02 < 0.3 < travel["keep"], travel
 
 
 def test_game_options_and_every_kind_of_style(server, tmp_path):
