@@ -8,12 +8,18 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, File, Form, Request, Response, UploadFile
 
 from motion import dance_features as DF
-from service.clips import RootMotion
 from service.deps import DataPlaneDep, SettingsDep
 from service.errors import InvalidRequest
 from service.requests import DanceRequest
 from service.routes import answers
-from service.routes.fields import FormatQuery, MappingField, parse_mapping, text_upload, upload
+from service.routes.fields import (
+    FormatQuery,
+    MappingField,
+    RootMotionField,
+    parse_mapping,
+    text_upload,
+    upload,
+)
 from service.routes.known_fields import only_known_fields
 
 router = APIRouter(tags=["dance"])
@@ -57,13 +63,7 @@ async def create_dance(
     fps: Annotated[float, Form(gt=0, le=MAX_FPS)] = 30.0,
     mapping: MappingField = None,
     format: FormatQuery = None,  # noqa: A002
-    root_motion: Annotated[
-        RootMotion,
-        Form(
-            description="keep the dance's travel across the floor, or in_place: the hips "
-            "held over one spot (vertical bob and facing kept)"
-        ),
-    ] = "keep",
+    root_motion: RootMotionField = "keep",
 ) -> Response:
     rig = None
     if isinstance(skeleton, str):

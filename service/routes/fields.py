@@ -33,6 +33,13 @@ MappingField = Annotated[
         "round), for joints the known naming conventions miss"
     ),
 ]
+RootMotionField = Annotated[
+    RootMotion,
+    Form(
+        description="keep the root's travel across the floor, or in_place: the hips held "
+        "over one spot on the floor (vertical bob and facing kept)"
+    ),
+]
 FormatQuery = Annotated[
     Format | None,
     Query(
@@ -148,13 +155,7 @@ async def read_content_fields(
             "comes back looping; true: take it as a loop; false: never"
         ),
     ] = "auto",
-    root_motion: Annotated[
-        RootMotion,
-        Form(
-            description="keep the root's travel, or in_place: the hips held over one spot "
-            "on the floor (vertical bob and facing kept)"
-        ),
-    ] = "keep",
+    root_motion: RootMotionField = "keep",
 ) -> ContentClip:
     """The content fields as one dependency: the routes that re-style a clip declare them
     once, and hand the request its :class:`ContentClip`."""
