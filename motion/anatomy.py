@@ -127,7 +127,8 @@ def knees_forward(motion: Motion, blend_seconds: float = SWIVEL_BLEND_SECONDS) -
     need nothing near them stay bit for bit."""
     C.check_motion(motion, "the knee swivel")
     parents = motion.skeleton.parents
-    grot, gpos = K.fk(motion.lrot, motion.lpos, parents)
+    legs = [C.INDEX[f"{n}_{s}"] for s in "LR" for n in ("UpperLeg", "LowerLeg", "Foot")]
+    grot, gpos = K.fk(motion.lrot, motion.lpos, parents, joints=legs + list(FACING_JOINTS))
     forward = K.facing_directions(gpos, *FACING_JOINTS)
     reach = max(1, int(round(blend_seconds * motion.fps)))
     lrot = motion.lrot.copy()
