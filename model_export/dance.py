@@ -2,23 +2,26 @@
 
     python -m model_export.dance [--checkpoint checkpoints/dance.pt] [--models-dir models]
 
-Two graphs, both with a symbolic batch axis:
+Three graphs, each with a symbolic batch axis:
 
 - ``audio``: ``audio (batch, time, 97)`` standardised song features -> ``code (batch, time,
   128)`` and ``genre_probs (batch, 4)`` (the classifier head over the music genres);
 - ``step``: one frame of generation with the LSTM states explicit, ``code (batch, 128)``,
   ``genre (batch, 7)`` (one-hot or probabilities), ``prev (batch, 134)`` standardised pose,
-  ``h1, c1, h2, c2 (batch, hidden)`` -> ``pose (batch, 134)`` and ``h1_out .. c2_out``.
+  ``h1, c1, h2, c2 (batch, hidden)`` -> ``pose (batch, 134)`` and ``h1_out .. c2_out``;
+- ``step_float``: the same step with float weights.
 
 The step graph ships with 8-bit weights (onnxruntime's dynamic quantisation, a scale per
 output channel): a whole song runs it once a frame, and it is bound by reading its weights,
 so 8 bits halve the generation loop (docs/dance_alignment.md, rule 21; docs/quantization.md).
 
-Writes ``models/dance/{audio,step}.onnx`` and ``models/dance/stats.npz`` (feature statistics
-and the seeded start poses) and the manifest entry ``dance-dwm``. Parity with torch is
-checked before listing: the audio graph at several shapes, the step graph over
-``PARITY_STEPS`` autoregressive steps, each fed torch's pose and states of the step before,
-in float to ``ATOL`` and once quantised to ``INT8_ATOL``.
+Writes ``models/dance/{audio,step,step_float}.onnx``, ``models/dance/step_check.npz`` (steps
+of the network the engine checks the 8-bit graph against on its CPU, serving ``step_float``
+where it fails), ``models/dance/stats.npz`` (feature statistics and the seeded start poses)
+and the manifest entry ``dance-dwm``. Parity with torch is checked before listing: the audio
+graph at several shapes, the step graph over ``PARITY_STEPS`` autoregressive steps, each fed
+torch's pose and states of the step before, in float to ``ATOL`` and once quantised to
+``INT8_ATOL``.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ PARITY_STEPS = 100
 RTOL, ATOL = 1e-4, 1e-4
 INT8_ATOL = 0.15  # the shipped folds' 8-bit steps differ from torch by 0.04-0.05 (standardised)
 AUDIO_SHAPES = [(1, 1), (1, 64), (2, 257)]
+CHECK_STEPS = 16
+BUNDLE_FILES = ("audio.onnx", "step.onnx", "step_float.onnx", "step_check.npz", "stats.npz")
 TRAINING_DATA = [
     "Dance with Melody (Tang et al. 2018; research only, no licence stated; commercial music)",
     "CMU Graphics Lab Motion Capture Database, salsa / Indian / modern dance takes (CMU terms)",
@@ -126,13 +131,13 @@ def graph_specs(model: TD.DanceNet) -> dict:
             [("audio", ["batch", "time", DF.AUDIO_CHANNELS])],
             [("code", ["batch", "time", code]), ("genre_probs", ["batch", len(DF.MUSIC_GENRES)])],
         ),
-        "step": MF.graph_spec(
-            f"{FOLDER}/step.onnx",
+        **{graph: MF.graph_spec(
+            f"{FOLDER}/{graph}.onnx",
             OPSET,
             [("code", ["batch", code]), ("genre", ["batch", len(DF.GENRES)]),
              ("prev", ["batch", DF.MOTION_CHANNELS]), *states],
             [("pose", ["batch", DF.MOTION_CHANNELS]), *((f"{n}_out", s) for n, s in states)],
-        ),
+        ) for graph in ("step", "step_float")},
     }  # fmt: skip
 
 
@@ -181,24 +186,41 @@ def parity(
             worst_audio = max(worst_audio, float(np.abs(g - w).max()))
 
     step = ort.InferenceSession(str(out / "step.onnx"), providers=["CPUExecutionProvider"])
+    worst_step = 0.0
+    for t, (feeds, want) in enumerate(teacher_forced(model, steps, gen)):
+        for g, w in zip(step.run(None, feeds), want, strict=True):
+            if not np.allclose(g, w, rtol=step_rtol, atol=step_atol):
+                raise RuntimeError(f"step.onnx: parity fails at step {t}")
+            worst_step = max(worst_step, float(np.abs(g - w).max()))
+    return {"audio": worst_audio, "step": worst_step, "steps": steps}
+
+
+def teacher_forced(model: TD.DanceNet, steps: int, gen: torch.Generator):
+    """The step graph's feeds and torch's outputs (pose, states) over ``steps`` steps of a
+    batch of 2 random sequences, each step fed torch's pose and states of the step before."""
     batch = 2
     code = torch.randn(batch, steps, model.config.code, generator=gen).relu()
     genre = torch.softmax(torch.randn(batch, len(DF.GENRES), generator=gen), -1)
     prev_t = torch.randn(batch, DF.MOTION_CHANNELS, generator=gen)
     state_t = model.init_state(batch)
-    worst_step = 0.0
     for t in range(steps):
         feeds = {"code": code[:, t].numpy(), "genre": genre.numpy(), "prev": prev_t.numpy()}
         feeds.update({n: s.numpy() for n, s in zip(STATES, state_t, strict=True)})
-        got = step.run(None, feeds)
         with torch.no_grad():
             prev_t, *state_t = model.step(code[:, t], genre, prev_t, *state_t)
-        for g, w in zip(got, [prev_t, *state_t], strict=True):
-            w = w.numpy()
-            if not np.allclose(g, w, rtol=step_rtol, atol=step_atol):
-                raise RuntimeError(f"step.onnx: parity fails at step {t}")
-            worst_step = max(worst_step, float(np.abs(g - w).max()))
-    return {"audio": worst_audio, "step": worst_step, "steps": steps}
+        yield feeds, [w.numpy() for w in (prev_t, *state_t)]
+
+
+def save_step_check(model: TD.DanceNet, path: Path, seed: int = 2) -> None:
+    """``path`` (.npz): :data:`CHECK_STEPS` teacher-forced steps' feeds (``in_<input>``) and
+    torch's outputs (``out_<output>``), each ``(steps, 2, C)``, and ``atol``: what the engine
+    checks its 8-bit step graph against where it runs (a CPU's kernels decide its rounding)."""
+    model.eval()
+    steps = list(teacher_forced(model, CHECK_STEPS, torch.Generator().manual_seed(seed)))
+    arrays = {f"in_{n}": np.stack([f[n] for f, _ in steps]) for n in steps[0][0]}
+    for k, name in enumerate(["pose", *(f"{n}_out" for n in STATES)]):
+        arrays[f"out_{name}"] = np.stack([w[k] for _, w in steps])
+    np.savez(path, **arrays, atol=np.float32(INT8_ATOL))
 
 
 def export_bundle(
@@ -220,14 +242,16 @@ def export_bundle(
     out.mkdir(parents=True)
     export_graphs(model, out)
     checks = parity(model, out)
+    shutil.copyfile(out / "step.onnx", out / "step_float.onnx")
     quantise_step(out)
     checks["step_int8"] = parity(model, out, int8=True)["step"]
+    save_step_check(model, out / "step_check.npz")
     stats.save(out / "stats.npz", start_poses=np.asarray(start_poses, np.float32))
     entry = {
         "name": name,
         "family": "dance",
         "version": MF.dated_version(name, models_dir),
-        "files": [f"{FOLDER}/audio.onnx", f"{FOLDER}/step.onnx", f"{FOLDER}/stats.npz"],
+        "files": [f"{FOLDER}/{file}" for file in BUNDLE_FILES],
         "graphs": graph_specs(model),
         "training_data": TRAINING_DATA,
         "licence": LICENCE,
@@ -241,6 +265,7 @@ def export_bundle(
         "extra": {
             "paper": "jacob2019 genre-based dance generation (audio -> FC -> 2 LSTM)",
             "stats": f"{FOLDER}/stats.npz",
+            "step_check": f"{FOLDER}/step_check.npz",
             "genres": list(DF.GENRES),
             "music_genres": list(DF.MUSIC_GENRES),
             "hidden": model.config.hidden,

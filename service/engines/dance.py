@@ -15,6 +15,7 @@ and ``finish``) and the evaluations call the same one.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
@@ -35,6 +36,8 @@ from service.engines import register_engine
 from service.engines.base import Engine
 from service.metrics import StageTimer
 from service.requests import DanceRequest
+
+logger = logging.getLogger(__name__)
 
 BUCKET = 256  # audio frames: the audio graph runs at multiples of this
 NOISE = 0.05  # std of the seeded noise on the fed-back pose (standardised units)
@@ -117,8 +120,32 @@ class DanceEngine(Engine):
         self.stats = DF.DanceStats.from_arrays(arrays)
         self.start_poses = np.asarray(arrays["start_poses"], np.float32)
         self.hidden = int(self.entry.extra["hidden"])
+        self.step_weights = self._choose_step_graph()
         if list(self.entry.extra.get("genres", DF.GENRES)) != list(DF.GENRES):
             raise ValueError("the bundle's genres differ from motion.dance_features.GENRES")
+
+    def _choose_step_graph(self) -> str:
+        """The 8-bit step graph where it reproduces the network's recorded steps on this CPU
+        (its kernels decide the rounding: one family of them once differed tenfold), else
+        its float twin. Bundles without the twin keep their one step graph."""
+        check = self.entry.extra.get("step_check")
+        if check is None or "step_float" not in self.sessions:
+            return "as listed"
+        arrays = self.load_npz(check)
+        names = [o.name for o in self.sessions["step"].get_outputs()]
+        worst = 0.0
+        for t in range(len(arrays["in_code"])):
+            feeds = {i.name: arrays[f"in_{i.name}"][t] for i in self.sessions["step"].get_inputs()}
+            got = self.sessions["step"].run(names, feeds)
+            worst = max(worst, *(float(np.abs(g - arrays[f"out_{n}"][t]).max())
+                                 for g, n in zip(got, names, strict=True)))  # fmt: skip
+        if worst <= float(arrays["atol"]):
+            self.sessions.pop("step_float")
+            return "8-bit"
+        logger.warning("%s: the 8-bit step graph differs from its network by %.3f on this CPU "
+                       "(at most %.3f): serving the float one", self.name, worst, arrays["atol"])  # fmt: skip
+        self.sessions["step"] = self.sessions.pop("step_float")
+        return "float"
 
     def styles(self) -> list[dict[str, Any]]:
         return [{"name": g, "music": g in DF.MUSIC_GENRES} for g in DF.GENRES]

@@ -209,6 +209,49 @@ def test_onnx_step_graph_matches_torch_over_100_steps(tmp_path, walk, film):
     assert session.run(None, feeds)[0].shape == (3, DF.MOTION_CHANNELS)
 
 
+def test_the_engine_serves_the_float_step_where_the_8_bit_one_fails_its_check(
+    tmp_path, walk, caplog
+):
+    import logging
+    import shutil
+
+    from model_export import dance as ED
+    from service.config import Settings
+    from service.engines.dance import DanceEngine
+    from service.manifest import load_manifest
+    from training import dance as TD
+
+    stats, m = _stats(walk)
+    for name, seed in (("shipped", 0), ("other", 1)):
+        torch.manual_seed(seed)
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "manifest.json").write_text('{"schema_version": 1, "models": []}')
+        model = TD.DanceNet(TD.Config(hidden=48, code=16, audio_hidden=32)).eval()
+        ED.export_bundle(model, stats, m[:4], tmp_path / name)
+    folder = tmp_path / "shipped"
+    check = dict(np.load(folder / "dance" / "step_check.npz"))
+
+    def loaded() -> tuple[DanceEngine, float]:  # the engine, and its step's worst difference
+        engine = DanceEngine(next(iter(load_manifest(folder).models)), folder, Settings())
+        engine.load()
+        step, worst = engine.sessions["step"], 0.0
+        for t in range(ED.CHECK_STEPS):
+            feeds = {k.removeprefix("in_"): v[t] for k, v in check.items() if k.startswith("in_")}
+            pose = step.run(["pose"], feeds)[0]
+            worst = max(worst, float(np.abs(pose - check["out_pose"][t]).max()))
+        return engine, worst
+
+    engine, worst = loaded()
+    assert engine.step_weights == "8-bit" and set(engine.sessions) == {"audio", "step"}
+    assert 1e-4 < worst < ED.INT8_ATOL
+    # an 8-bit graph that no longer computes this network (here: another network's)
+    shutil.copyfile(tmp_path / "other" / "dance" / "step.onnx", folder / "dance" / "step.onnx")
+    with caplog.at_level(logging.WARNING):
+        engine, worst = loaded()
+    assert engine.step_weights == "float" and set(engine.sessions) == {"audio", "step"}
+    assert worst < 1e-4 and "serving the float one" in caplog.text
+
+
 def test_evaluation_dances_from_its_first_seed():
     """``first_seed`` draws other dances of the same judge: seed k, with the genre the seed
     rotates to, as a request with that seed would dance it."""
