@@ -130,6 +130,7 @@ class Engine:
         self.registered = styles if styles is not None else StyleStore.from_settings(settings)
         self.sessions: dict[str, onnxruntime.InferenceSession] = {}
         self.warmup_ms: dict[str, float] = {}
+        self.warnings: list[str] = []  # what loading found that a user should know; it serves
         self.ready = False
 
     @property

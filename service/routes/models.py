@@ -29,6 +29,7 @@ class ModelInfo(ModelEntry):
     status: Literal["pending", "loading", "ready", "failed"]
     loaded: bool
     error: str | None = None
+    warnings: list[str] = []  # loaded, but not quite as shipped (e.g. a float fallback)
 
 
 class ModelsResponse(BaseModel):
@@ -51,6 +52,7 @@ async def list_models(registry: RegistryDep) -> ModelsResponse:
     models = []
     for entry in registry.entries:
         status = registry.model_status(entry.name)
+        engine = registry.engines.get(entry.name)
         models.append(
             ModelInfo(
                 **entry.model_dump(),
@@ -58,6 +60,7 @@ async def list_models(registry: RegistryDep) -> ModelsResponse:
                 status=status,
                 loaded=status == "ready",
                 error=registry.errors.get(entry.name),
+                warnings=engine.warnings if engine is not None else [],
             )
         )
     return ModelsResponse(

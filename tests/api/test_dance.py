@@ -152,6 +152,47 @@ def test_styles_lists_dance_genres(client):
     assert "dance-dwm" in text
 
 
+def test_a_bundle_whose_8_bit_step_fails_on_this_cpu_serves_the_float_one_and_says_so(
+    client, models_dir, tmp_path
+):
+    """What a CPU whose kernels round the 8-bit graph differently would see: here, another
+    network's 8-bit step graph in the bundle, listed with its hash."""
+    import shutil
+    import warnings
+
+    from model_export import dance as ED
+    from model_export import manifest as MF
+    from service.main import create_app
+    from training import dance as TD
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*starlette.testclient.*")
+        from fastapi.testclient import TestClient
+
+    assert client.get("/v1/models").json()["models"][0]["warnings"] == []
+    folder, other = tmp_path / "models", tmp_path / "other"
+    shutil.copytree(models_dir, folder)
+    (other / "dance").mkdir(parents=True)
+    torch.manual_seed(1)
+    ED.export_graphs(
+        TD.DanceNet(TD.Config(hidden=32, code=16, audio_hidden=32)).eval(), other / "dance"
+    )
+    ED.quantise_step(other / "dance")
+    shutil.copyfile(other / "dance" / "step.onnx", folder / "dance" / "step.onnx")
+    entry = json.loads((folder / "manifest.json").read_text())["models"][0]
+    entry["files"] = [f["path"] for f in entry["files"]]
+    MF.put_entry(entry, folder)  # hashed again: the registry loads it
+    app = create_app(Settings(models_dir=folder, max_audio_seconds=30.0))
+    with TestClient(app) as c:
+        assert app.state.registry.wait(60) and app.state.registry.ready
+        (model,) = c.get("/v1/models").json()["models"]
+        assert model["status"] == "ready" and len(model["warnings"]) == 1
+        assert "serving the float one" in model["warnings"][0]
+        engine = app.state.registry.engines[model["name"]]
+        assert engine.step_weights == "float" and set(engine.sessions) == {"audio", "step"}
+        assert post(c, click_wav(4.0)).status_code == 200
+
+
 def test_a_dance_from_features_computed_once_is_the_dance_from_the_song(models_dir):
     """An evaluation dances one song dozens of times from features it computed once: the
     engine must make the same dance from them as from the song, and must use them."""
