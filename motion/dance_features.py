@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import butter, filtfilt  # at import: its first import took 0.9 s of a request
 
 from motion import audio_features, beat_tracking
 from motion import beat_warp as BW
@@ -315,8 +316,6 @@ class DanceStats:
 def smooth_features(x: np.ndarray, cutoff_hz: float = 6.0, order: int = 2) -> np.ndarray:
     """Zero-phase Butterworth low-pass (``scipy.signal``) of rotation and root channels of raw
     features ``(F, MOTION_CHANNELS)``; contacts are kept. Short clips are returned as they are."""
-    from scipy.signal import butter, filtfilt
-
     x = np.asarray(x, dtype=np.float64)
     b, a = butter(order, cutoff_hz / (0.5 * FPS))
     pad = 3 * max(len(a), len(b))

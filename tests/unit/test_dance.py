@@ -83,6 +83,17 @@ def test_smoothing_keeps_contacts(walk):
     )
 
 
+def test_no_dance_request_pays_for_importing_its_filters():
+    """The first dance request's motion stage took 915 ms and the next ones 20: the
+    low-pass imported scipy.signal on first use. The service imports the engine at start."""
+    import subprocess
+    import sys
+
+    code = "import sys, service.engines.dance; print('scipy.signal' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "True"
+
+
 def test_genres():
     assert DF.genre_vector("waltz")[DF.genre_index("waltz")] == 1
     v = DF.genre_vector(probabilities=[0.1, 0.2, 0.3, 0.4])
