@@ -79,7 +79,13 @@ train-translator: $(VENV)/.dev
 # cache/carry/ (13 MB: Bandai with float16 rotations, the pair alignments; training/carry.py).
 .PHONY: carry-translator
 carry-translator: $(VENV)/.dev
-	$(PY) -m training.carry
+	$(PY) -m training.carry translator
+
+# The same for the dance: cache/carry/dance_prepared.npz (18 MB: the prepared songs and
+# dances in float16), for `python -m training.dance_schedule --device cuda --prepared ...`.
+.PHONY: carry-dance
+carry-dance: $(VENV)/.dev
+	$(PY) -m training.carry dance
 
 # The fast style networks, one per translator style, each distilled from the shipped
 # translator's restyler for that style (training/fast_style.py; CPU, about an hour on 2

@@ -2,6 +2,7 @@
 ``training.dance_data``, losses in ``training.dance_losses``).
 
     python -m training.dance [--max-steps N] [--minutes M] [--resume | --init CKPT]
+        [--device cuda --prepared cache/carry/dance_prepared.npz]  # a lent GPU machine
     python -m training.dance_schedule          # the shipped model's stages (make train-dance)
     python -m training.eval_dance              # held-out songs, through the shipped engine
 
@@ -52,7 +53,7 @@ from torch import nn
 
 from motion import dance_features as DF
 from training import dance_genre as TG
-from training.dance_data import Sequence, WindowSampler, prepare, start_poses
+from training.dance_data import Sequence, WindowSampler, load_prepared, prepare, start_poses
 from training.dance_losses import Losses
 
 REPO = Path(__file__).resolve().parent.parent
@@ -157,7 +158,7 @@ class DanceNet(nn.Module):
         return code, self.classifier(code.mean(dim=1))
 
     def init_state(self, batch: int) -> tuple[torch.Tensor, ...]:
-        z = torch.zeros(batch, self.config.hidden)
+        z = torch.zeros(batch, self.config.hidden, device=self.out.weight.device)
         return z, z, z, z
 
     def step(self, code, genre, prev, h1, c1, h2, c2):
@@ -186,6 +187,8 @@ class DanceNet(nn.Module):
         frames)."""
         state = self.init_state(motion.shape[0])
         prev = motion[:, 0]
+        if gt_mask is not None and gt_mask.dim() == 1:
+            gt_mask = gt_mask.tolist()  # read each frame without a device round trip
         outs = []
         for t in range(1, motion.shape[1]):
             pose, *state = self.step(code[:, t], genre, prev, *state)
@@ -194,11 +197,15 @@ class DanceNet(nn.Module):
                 prev = motion[:, t]
             elif gt_mask is None:
                 prev = pose
-            elif gt_mask.dim() == 1:
-                prev = motion[:, t] if bool(gt_mask[t]) else pose
+            elif isinstance(gt_mask, list):
+                prev = motion[:, t] if gt_mask[t] else pose
             else:
                 prev = torch.where(gt_mask[:, t, None], motion[:, t], pose)
         return torch.stack(outs, dim=1)
+
+
+def to_device(batch: tuple[torch.Tensor, ...], device: torch.device) -> tuple[torch.Tensor, ...]:
+    return tuple(t.to(device) for t in batch)
 
 
 def ac_mask(frames: int, gt: int, cond: int, rng: np.random.Generator) -> torch.Tensor:
@@ -250,6 +257,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--checkpoint", type=Path, default=CHECKPOINT)
     p.add_argument("--log-dir", type=Path, default=RUNS)
     p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--device", default="cpu", help="torch device to train on (cuda, ...)")
+    p.add_argument("--prepared", type=Path, default=None,
+                   help="the sequences from this file (`python -m training.carry dance`), "
+                   "not from the data folder")  # fmt: skip
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--fold",
@@ -319,6 +330,7 @@ def train_step(
     model, losses, batch, args, rng, step, weights, judge=None
 ) -> dict[str, torch.Tensor]:
     audio, motion, genre, music = batch
+    device = audio.device
     code, logits = model.encode_audio(audio)
     asked = genre.clone()
     swapped = TG.swap_genres(asked, music, args.swap_share, rng)
@@ -328,23 +340,23 @@ def train_step(
         probs = torch.softmax(logits.detach(), dim=-1)
         predicted = torch.zeros_like(onehot)
         predicted[:, : len(DF.MUSIC_GENRES)] = probs
-        use = music & ~swapped & (torch.rand(len(genre)) < args.predicted_genre)
+        use = music & ~swapped & (torch.rand(len(genre)).to(device) < args.predicted_genre)
         cond_vec = torch.where(use[:, None], predicted, onehot)
     cond = max(1, min(args.cond_frames, 1 + step * args.cond_frames // max(args.cond_ramp, 1)))
-    mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng)
+    mask = ac_mask(motion.shape[1], args.gt_frames, cond, rng).to(device)
     if swapped.any():  # a swapped window has no ground truth to feed back
         mask = mask[None].expand(len(genre), -1) & ~swapped[:, None]
     pred = model.rollout(code, cond_vec, motion, mask, warm=args.warm)
     if swapped.all():
-        parts = {k: torch.zeros(()) for k in ("feat", "pos", "effort", "skate")}
+        parts = {k: torch.zeros((), device=device) for k in ("feat", "pos", "effort", "skate")}
     else:
         parts = losses(pred[~swapped], motion[~swapped, 1:])
     if music.any():
         parts["genre"] = nn.functional.cross_entropy(logits[music], genre[music])
     else:
-        parts["genre"] = torch.zeros(())
+        parts["genre"] = torch.zeros((), device=device)
     for k in GUARDS:
-        parts[k] = torch.zeros(())
+        parts[k] = torch.zeros((), device=device)
     if judge is not None and music.any():
         frames, kinetic, pos, raw = TG.window_inputs(losses, pred[music][:, args.warm - 1 :])
         parts["judge"] = judge.judged(judge(frames), asked[music])
@@ -402,7 +414,8 @@ def train(args: argparse.Namespace) -> None:
         torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    seqs = prepare()
+    device = torch.device(args.device)
+    seqs = load_prepared(args.prepared) if args.prepared else prepare()
     train_seqs, val_seqs = split(seqs, FOLDS[args.fold])
     weights = {k: getattr(args, f"w_{k}") for k in WEIGHTS}
     if args.resume and args.checkpoint.exists():
@@ -431,23 +444,26 @@ def train(args: argparse.Namespace) -> None:
             None,
         )
         poses, stages = start_poses(train_seqs), []
-    losses = Losses(stats)
+    model.to(device)
+    losses = Losses(stats).to(device)
     optimiser = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     if ckpt is not None and optimiser_path(args.checkpoint).exists():
-        optimiser.load_state_dict(torch.load(optimiser_path(args.checkpoint), weights_only=False))
+        optimiser.load_state_dict(
+            torch.load(optimiser_path(args.checkpoint), weights_only=False, map_location=device)
+        )
     sampler = WindowSampler(train_seqs, stats, args.window, args.cmu_share, args.seed + step)
     val_sampler = WindowSampler(val_seqs, stats, args.window, 0.0, 1234)
-    val_batches = [val_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
+    val_batches = [to_device(val_sampler.batch(16, beat_dropout=0.0), device) for _ in range(4)]
     seen_sampler = WindowSampler(train_seqs, stats, args.window, 0.0, 77)
-    seen_batches = [seen_sampler.batch(16, beat_dropout=0.0) for _ in range(4)]
+    seen_batches = [to_device(seen_sampler.batch(16, beat_dropout=0.0), device) for _ in range(4)]
     judge = None
     if any(weights[k] > 0 for k in GUARDS):
         judge = TG.fit_judge(
             WindowSampler(train_seqs, stats, args.window, 0.0, args.seed + 99),
             WindowSampler(val_seqs, stats, args.window, 0.0, 4321),
-            losses,
+            Losses(stats),  # the real windows are drawn on the CPU
             skip=args.warm - 1,
-        )
+        ).to(device)
     tb = None
     try:
         from torch.utils.tensorboard import SummaryWriter
@@ -465,7 +481,7 @@ def train(args: argparse.Namespace) -> None:
         lr = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / total_steps, 1.0)))
         for group in optimiser.param_groups:
             group["lr"] = lr
-        batch = sampler.batch(args.batch)
+        batch = to_device(sampler.batch(args.batch), device)
         parts = train_step(model, losses, batch, args, rng, step, weights, judge)
         optimiser.zero_grad()
         parts["total"].backward()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -93,12 +94,7 @@ def prepare(log=print) -> list[Sequence]:
     ).hexdigest()[:16]
     path = cache_dir() / f"dance_prepared_{key}.npz"
     if path.exists():
-        with np.load(path) as z:
-            meta = json.loads(str(z["meta"]))
-            return [
-                Sequence(m["name"], m["genre"], z[f"a{i}"], z[f"m{i}"], m["music"], m["trusted"])
-                for i, m in enumerate(meta)
-            ]
+        return load_prepared(path)
     seqs = []
     for clip in dwm:
         alignment = DA.alignment_for(clip.name, table)
@@ -117,14 +113,34 @@ def prepare(log=print) -> list[Sequence]:
                 False, False,
             )
         )  # fmt: skip
+    save_prepared(path, seqs)
+    return seqs
+
+
+def save_prepared(path: Path, seqs: list[Sequence], half: bool = False) -> None:
+    """``seqs`` in one file (``load_prepared`` reads it back). ``half``: as float16, for a
+    copy carried to a lent machine (``training.carry dance``: 18 MB against 39 MB)."""
+    dtype = np.float16 if half else np.float32
     arrays = {}
     for i, s in enumerate(seqs):
-        arrays[f"a{i}"], arrays[f"m{i}"] = s.audio, s.motion
+        arrays[f"a{i}"], arrays[f"m{i}"] = s.audio.astype(dtype), s.motion.astype(dtype)
     meta = [
         {"name": s.name, "genre": s.genre, "music": s.has_music, "trusted": s.trusted} for s in seqs
     ]
-    np.savez_compressed(path, meta=np.array(json.dumps(meta)), **arrays)
-    return seqs
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+    np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+
+
+def load_prepared(path: Path) -> list[Sequence]:
+    """The sequences ``save_prepared`` wrote to ``path``, as float32."""
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta"]))
+        return [
+            Sequence(m["name"], m["genre"], z[f"a{i}"].astype(np.float32),
+                     z[f"m{i}"].astype(np.float32), m["music"], m["trusted"])
+            for i, m in enumerate(meta)
+        ]  # fmt: skip
 
 
 def start_poses(seqs: list[Sequence], count: int = 64, seed: int = 0) -> np.ndarray:

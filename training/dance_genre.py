@@ -157,7 +157,7 @@ class ConvJudge(nn.Module):
             d = torch.pdist(rows).mean()
             floor = DIVERSITY_FLOOR * self.genre_spread[g]
             out.append((torch.relu(floor - d) / floor) ** 2)
-        return torch.stack(out).mean() if out else torch.zeros(())
+        return torch.stack(out).mean() if out else kinetic.new_zeros(())
 
     def fit(
         self,
@@ -236,8 +236,8 @@ def swap_genres(genre: torch.Tensor, music: torch.Tensor, share: float, rng) -> 
     """``(B,)`` bool: music windows (with probability ``share``) whose genre is swapped, and
     ``genre`` changed in place to another music genre, uniformly, for them."""
     count = len(DF.MUSIC_GENRES)
-    swapped = music & torch.from_numpy(rng.random(len(genre)) < share)
-    shift = torch.from_numpy(rng.integers(1, count, len(genre)))
+    swapped = music & torch.from_numpy(rng.random(len(genre)) < share).to(music.device)
+    shift = torch.from_numpy(rng.integers(1, count, len(genre))).to(genre.device)
     genre[swapped] = (genre[swapped] + shift[swapped]) % count
     return swapped
 

@@ -1,6 +1,7 @@
 """Replay the shipped dance model's training schedule (``dance_schedule.json`` beside this file).
 
     python -m training.dance_schedule [--out checkpoints/dance.pt] [--from-scratch] [--fold K]
+        [--device cuda --prepared cache/carry/dance_prepared.npz]
 
 A stage is either the flags of one ``python -m training.dance`` run (the others at their
 defaults), started (``--init``) from the weights, statistics and start poses of the stage
@@ -11,6 +12,8 @@ in ``--work``/NAME.pt, so a replay continues an unfinished stage (``--resume``),
 finished ones, and copies the last stage's checkpoint to ``--out``; it does nothing when
 ``--out`` has every stage; ``--from-scratch`` runs every stage again. ``--fold K`` trains
 every stage without fold K's songs (``training.dance.FOLDS``; the shipped model is fold 0's).
+``--device`` and ``--prepared`` pass to every stage: on a lent machine, which has no data
+folder, the sequences come from the file ``python -m training.carry dance`` wrote.
 """
 
 from __future__ import annotations
@@ -98,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--from-scratch", action="store_true")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--fold", type=int, default=0, choices=range(len(TD.FOLDS)))
+    parser.add_argument("--device", default="cpu", help="torch device to train on (cuda, ...)")
+    parser.add_argument("--prepared", type=Path, default=None,
+                        help="the sequences from this file, not from the data folder")  # fmt: skip
     args = parser.parse_args(argv)
     stages = load_schedule(args.schedule)
     names = [s["name"] for s in stages]
@@ -116,7 +122,9 @@ def main(argv: list[str] | None = None) -> int:
             run_blend(stage, args.work, names)
             continue
         flags = ["--checkpoint", str(path), "--threads", str(args.threads), "--stage", name,
-                 "--fold", str(args.fold)]  # fmt: skip
+                 "--fold", str(args.fold), "--device", args.device]  # fmt: skip
+        if args.prepared:
+            flags += ["--prepared", str(args.prepared)]
         if current == name:
             flags.append("--resume")
         elif i > 0:

@@ -181,6 +181,42 @@ def test_training_validates_on_its_own_songs_beside_the_held_out_ones(
     assert figures["training_songs_feat"] < 0.5 * figures["feat"], figures
 
 
+def test_a_carried_file_trains_the_dance_without_the_data_folder(tmp_path, walk, monkeypatch):
+    """A lent machine has no data folder: the sequences saved as float16 (``training.carry
+    dance``) come back within float16's precision, and training reads them from the file
+    alone, on the device it is given."""
+    import torch
+
+    from training import dance as TD
+    from training.dance_data import Sequence, load_prepared, save_prepared
+
+    m = DF.encode(walk).features
+    audio = np.random.default_rng(0).normal(size=(len(m), DF.AUDIO_CHANNELS)).astype(np.float32)
+    seqs = [Sequence("DANCE_W_1", 3, audio, m, True, True),
+            Sequence(TD.FOLDS[0][0], 3, audio[::-1].copy(), m[::-1].copy(), True, False)]  # fmt: skip
+    carried = tmp_path / "dance_prepared.npz"
+    save_prepared(carried, seqs, half=True)
+    back = load_prepared(carried)
+    assert [(b.name, b.genre, b.has_music, b.trusted) for b in back] == [
+        (s.name, s.genre, s.has_music, s.trusted) for s in seqs
+    ]
+    for b, s in zip(back, seqs, strict=True):
+        assert b.motion.dtype == np.float32 and b.audio.dtype == np.float32
+        np.testing.assert_allclose(b.motion, s.motion, rtol=1e-3, atol=1e-3)
+        np.testing.assert_allclose(b.audio, s.audio, rtol=1e-3, atol=1e-3)
+    monkeypatch.setenv("MOTION_DATA_DIR", str(tmp_path / "no-data"))
+    monkeypatch.setattr(TD, "prepare", lambda: pytest.fail("read the data folder"))
+    checkpoint = tmp_path / "dance.pt"
+    TD.main(["--prepared", str(carried), "--device", "cpu", "--hidden", "32", "--window", "24",
+             "--batch", "4", "--steps", "2", "--cmu-share", "0", "--threads", "1",
+             "--checkpoint", str(checkpoint), "--log-dir", str(tmp_path / "runs")])  # fmt: skip
+    ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    assert ckpt["step"] == 2 and ckpt["train_config"]["prepared"] == str(carried)
+    want = DF.DanceStats.fit([back[0].audio], [back[0].motion])  # the training song's
+    for name, value in want.arrays().items():
+        np.testing.assert_allclose(ckpt["stats"][name], value, rtol=1e-5, err_msg=name)
+
+
 def test_ac_mask_alternates():
     from training import dance as TD
 

@@ -4,6 +4,8 @@ and fine-tuning a network that had none."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -180,6 +182,30 @@ def test_schedule_stages_are_training_flags():
         for name, value in stage["flags"].items():
             assert getattr(args, name.replace("-", "_")) == value
     assert DS.stage_argv({"flags": {"film": True, "steps": 5}}) == ["--film", "--steps", "5"]
+
+
+def test_the_schedule_passes_the_device_and_the_carried_file_to_every_stage(tmp_path, monkeypatch):
+    """On a lent machine every stage trains on its device from the carried sequences."""
+    import json
+
+    from training import dance as TD
+    from training import dance_schedule as DS
+
+    runs = []
+    monkeypatch.setattr(TD, "main", lambda argv: runs.append(argv) or 0)
+    monkeypatch.setattr(DS, "stages_of", lambda path, fold=0: ([], None))
+    schedule = tmp_path / "schedule.json"
+    schedule.write_text(json.dumps({"stages": [{"name": "base", "flags": {"steps": 2}},
+                                               {"name": "more", "flags": {"steps": 3}}]}))  # fmt: skip
+    with pytest.raises(SystemExit, match="stopped before its last step"):  # nothing trained
+        DS.main(["--schedule", str(schedule), "--work", str(tmp_path), "--device", "cuda",
+                 "--prepared", "cache/carry/dance_prepared.npz"])  # fmt: skip
+    args = TD.parse_args(runs[0])
+    assert (args.device, args.prepared, args.steps) == (
+        "cuda",
+        Path("cache/carry/dance_prepared.npz"),
+        2,
+    )
 
 
 def test_a_blend_moves_the_start_towards_the_mean_of_its_fine_tunings():
