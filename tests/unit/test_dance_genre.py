@@ -227,18 +227,22 @@ def test_a_blend_moves_the_start_towards_the_mean_of_its_fine_tunings():
     TD.DanceNet(TD.Config(film=True)).load_state_dict(out["model"])
 
 
-def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path):
+def test_the_schedule_replays_branches_and_a_blend_and_resumes(tmp_path, monkeypatch):
     """A tiny schedule of the shipped one's shape (a base, two fine-tunings of it, their
     blend) on the real dances, fold 1: the checkpoint is the blend of the stage checkpoints,
     every stage is fold 1's and no fold-0 stage may start from them, a second replay trains
     nothing, and a lost stage is trained again alone."""
+    import functools
     import json
 
     from tests.conftest import data_path
     from training import dance as TD
+    from training import dance_genre as TG
     from training import dance_schedule as DS
 
     data_path("dance-with-melody")  # skips without the dance data
+    # the fine-tunings' judge, fitted on a few real windows: the replay is tested, not the judge
+    monkeypatch.setattr(TG, "fit_judge", functools.partial(TG.fit_judge, batches=4, steps=20))
     small = {"steps": 2, "batch": 2, "window": 32, "cond-ramp": 1, "val-every": 1000,
              "save-every": 1000}  # fmt: skip
     tuning = {**small, "film": True, "swap-share": 0.5, "w-judge": 0.2}
