@@ -46,6 +46,23 @@ def test_importing_motion_loads_no_torch():
     assert r.returncode == 0, r.stderr
 
 
+def test_dance_training_needs_only_what_a_lent_gpu_machine_has():
+    """``training.dance`` and its schedule run on a lent machine from a carried file
+    (``training.carry dance``), whose image has PyTorch, NumPy, SciPy, numba, tqdm and
+    TensorBoard (and soundfile and soxr as carried wheels), not the serving packages, Blender
+    or librosa: importing them loads none of those."""
+    pytest.importorskip("torch")
+    code = (
+        "import sys\n"
+        "import training.dance, training.dance_schedule\n"
+        "extra = {'fastapi', 'uvicorn', 'multipart', 'pydantic_settings', 'pygltflib', 'bpy',\n"
+        "         'librosa'} & set(sys.modules)\n"
+        "assert not extra, sorted(extra)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
 # The data plane and its engines; only service.main, problems, middleware, auth, deps and
 # service/routes speak HTTP.
 HTTP_FREE = (
