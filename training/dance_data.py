@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import torch
 
 from motion import dance_features as DF
 from motion import kinematics as K
+from training.data import save_npz
 
 PREPARED_VERSION = "1"
 
@@ -127,9 +127,7 @@ def save_prepared(path: Path, seqs: list[Sequence], half: bool = False) -> None:
     meta = [
         {"name": s.name, "genre": s.genre, "music": s.has_music, "trusted": s.trusted} for s in seqs
     ]
-    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-    np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
-    os.replace(tmp, path)
+    save_npz(path, meta=np.array(json.dumps(meta)), **arrays)
 
 
 def load_prepared(path: Path) -> list[Sequence]:

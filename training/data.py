@@ -93,6 +93,15 @@ def _fingerprint(paths: list[Path]) -> str:
     return h.hexdigest()[:16]
 
 
+def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
+    """``arrays`` compressed into ``path``, whole or not at all: written to a temporary file
+    of this process's own (two processes may build one cache at once), then renamed."""
+    path = Path(path)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+
+
 def save_clips(path: Path, clips: list[Clip], fingerprint: str, half: bool = False) -> None:
     """``clips`` as a cache file (``read_clips`` reads it back). ``half``: rotations as
     float16, for a copy carried to a lent machine (half the bytes; quaternion components
@@ -104,18 +113,14 @@ def save_clips(path: Path, clips: list[Clip], fingerprint: str, half: bool = Fal
         }
         for c in clips
     ]
-    lengths = np.array([c.num_frames for c in clips])
-    # one temporary file per process: `make train-fast` builds the caches in two at once
-    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-    np.savez_compressed(
-        tmp,
+    save_npz(  # `make train-fast` builds the caches in two processes at once
+        path,
         fingerprint=np.array(fingerprint),
         meta=np.array(json.dumps(meta)),
-        lengths=lengths,
+        lengths=np.array([c.num_frames for c in clips]),
         lrot=np.concatenate([c.lrot for c in clips]).astype(np.float16 if half else np.float32),
         root=np.concatenate([c.root for c in clips]).astype(np.float32),
     )
-    os.replace(tmp, path)
 
 
 def _load_cache(path: Path, fingerprint: str | None) -> list[Clip] | None:

@@ -20,7 +20,7 @@ import numpy as np
 
 from motion import canonical as C
 from motion import features as Fe
-from training.data import Clip
+from training.data import Clip, save_npz
 
 MIRRORED = "~mirrored"  # the suffix of a mirror image's name and take
 _SIDE_WORDS = {"left": "right", "right": "left", "Left": "Right", "Right": "Left",
@@ -260,18 +260,15 @@ def window_of(x: np.ndarray, start: int, length: int) -> np.ndarray:
 def save_alignments(path, alignments: dict[tuple[str, str], np.ndarray | None]) -> None:
     """Computed alignments as one ``.npz`` (``None`` stored as an empty array)."""
     import json
-    import os
 
     keys = sorted(alignments)
     values = [np.zeros(0) if alignments[k] is None else alignments[k] for k in keys]
-    tmp = f"{path}.{os.getpid()}.tmp.npz"  # two trainings at once may both save
-    np.savez_compressed(
-        tmp,
+    save_npz(  # two trainings at once may both save
+        path,
         keys=np.array(json.dumps(keys)),
         lengths=np.array([len(v) for v in values]),
         frames=np.concatenate(values).astype(np.float32) if values else np.zeros(0),
     )
-    os.replace(tmp, path)
 
 
 def load_alignments(path) -> dict[tuple[str, str], np.ndarray | None]:
