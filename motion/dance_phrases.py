@@ -1,0 +1,120 @@
+"""A dance made of real phrases: a library of real dances with the music they were danced
+to, and a sampler that joins phrases of the requested genre where the poses meet and the
+music is alike (a motion graph with music matching, as ChoreoMaster, Chen et al. 2021).
+
+The sampler works on standardised dance features and a per-frame music descriptor (the
+dance network's audio code); what it returns takes the rolled-out poses' place in the
+dance engine, so the low-pass, the standstills, the feet and the beat warp follow it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from motion import dance_features as DF
+
+PHRASE = 120  # frames of each phrase (4 s at 30 fps): a few bars of any ballroom tempo
+BLEND = 8  # frames of the cross-fade at a join
+STRIDE = 4  # library frames between candidate phrase starts
+MUSIC_STEP = 8  # frames between the music rows compared over a phrase
+CHOICES = 8  # the seeded pick is among this many cheapest candidates
+REUSE_FRAMES = 90 * DF.FPS  # a phrase is not danced twice within this many output frames
+POSE = slice(0, DF.ROTATION_CHANNELS + 1)  # the body's rotations and the root's height
+
+
+@dataclass
+class PhraseLibrary:
+    """Real dances, concatenated: standardised ``motion (N, M)``, the standardised ``music
+    (N, D)`` descriptor they were danced to, each frame's ``genre`` and ``song`` index."""
+
+    motion: np.ndarray
+    music: np.ndarray
+    genre: np.ndarray
+    song: np.ndarray
+
+    def candidates(self, genre: int) -> np.ndarray:
+        """Phrase starts of ``genre``: every ``STRIDE`` frames, the phrase and its blend
+        tail inside one song, two frames before the start for the pose and its change."""
+        n = len(self.motion)
+        starts = np.arange(2, n - PHRASE - BLEND, STRIDE)
+        keep = (self.genre[starts] == genre) & (
+            self.song[starts - 1] == self.song[starts + PHRASE + BLEND - 1]
+        )
+        return starts[keep]
+
+
+def _music_windows(music: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """``(len(starts), PHRASE // MUSIC_STEP * D)``: the music rows over each phrase."""
+    rows = starts[:, None] + np.arange(0, PHRASE, MUSIC_STEP)[None]
+    return music[np.minimum(rows, len(music) - 1)].reshape(len(starts), -1)
+
+
+def _pose_key(motion: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """The pose at ``frame`` and its change from the frame before, to match a join."""
+    now, before = motion[frame, POSE], motion[frame - 1, POSE]
+    return np.concatenate([now, 2.0 * (now - before)], axis=-1)
+
+
+class PhraseSampler:
+    """Joins phrases of one library; the candidates' music windows are computed once per
+    genre."""
+
+    def __init__(self, library: PhraseLibrary) -> None:
+        self.library = library
+        self._genres: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def _genre(self, genre: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if genre not in self._genres:
+            starts = self.library.candidates(genre)
+            if len(starts) == 0:
+                raise ValueError(f"the phrase library has no dance of genre {DF.GENRES[genre]}")
+            self._genres[genre] = (
+                starts,
+                _music_windows(self.library.music, starts),
+                _pose_key(self.library.motion, starts - 1),
+            )
+        return self._genres[genre]
+
+    def dance(
+        self, music: np.ndarray, genre: int, rng: np.random.Generator
+    ) -> tuple[np.ndarray, list[tuple[int, int]]]:
+        """Standardised poses ``(F, M)`` for ``music (F, D)``, and the ``(output frame,
+        library frame)`` of each phrase. Each join picks, among the ``CHOICES`` cheapest,
+        a phrase whose first pose meets the dance's last and whose music is like the next
+        ``PHRASE`` frames' (each cost over its median among the candidates)."""
+        lib = self.library
+        starts, windows, keys = self._genre(genre)
+        frames = len(music)
+        out = np.empty((frames + PHRASE + BLEND, lib.motion.shape[1]), np.float32)
+        last_used = np.full(len(lib.motion), -(10**9), np.int64)
+        joins: list[tuple[int, int]] = []
+        t, source = 0, -1
+        while t < frames:
+            wanted = _music_windows(music, np.array([t]))[0]
+            cost = ((windows - wanted) ** 2).mean(axis=1)
+            cost = cost / max(float(np.median(cost)), 1e-9)
+            if source >= 0:
+                pose = ((keys - _pose_key(out, np.array([t - 1]))[0]) ** 2).mean(axis=1)
+                cost = cost + pose / max(float(np.median(pose)), 1e-9)
+            recent = (t - last_used[starts] < REUSE_FRAMES) | (
+                t - last_used[starts + PHRASE - 1] < REUSE_FRAMES
+            )
+            if not recent.all():
+                cost = np.where(recent, np.inf, cost)
+            best = np.argsort(cost)[:CHOICES]
+            start = int(starts[best[rng.integers(len(best))]])
+            phrase = lib.motion[start : start + PHRASE + BLEND]
+            if source >= 0:  # cross-fade the last phrase's continuation into this one
+                fade = np.linspace(0.0, 1.0, BLEND + 2, dtype=np.float32)[1:-1, None]
+                tail = lib.motion[source : source + BLEND]
+                out[t : t + BLEND] = (1.0 - fade) * tail + fade * phrase[:BLEND]
+                out[t + BLEND : t + PHRASE] = phrase[BLEND:PHRASE]
+            else:
+                out[t : t + PHRASE] = phrase[:PHRASE]
+            last_used[start : start + PHRASE] = t
+            joins.append((t, start))
+            source = start + PHRASE  # where this phrase would go on, for the next fade
+            t += PHRASE
+        return out[:frames], joins
