@@ -13,7 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from motion import canonical as C
 from motion import dance_features as DF
+from motion import rotations as rot
+from motion.skeleton import Motion
 
 PHRASE = 120  # frames of each phrase (4 s at 30 fps): a few bars of any ballroom tempo
 BLEND = 8  # frames of the cross-fade at a join
@@ -22,6 +25,8 @@ MUSIC_STEP = 8  # frames between the music rows compared over a phrase
 CHOICES = 8  # the seeded pick is among this many cheapest candidates
 REUSE_FRAMES = 90 * DF.FPS  # a phrase is not danced twice within this many output frames
 POSE = slice(0, DF.ROTATION_CHANNELS + 1)  # the body's rotations and the root's height
+KEY = slice(0, DF.ROTATION_CHANNELS + DF.ROOT_CHANNELS)  # and the root's velocity and turn
+HIPS = C.INDEX["Hips"]
 
 
 @dataclass
@@ -33,6 +38,8 @@ class PhraseLibrary:
     music: np.ndarray
     genre: np.ndarray
     song: np.ndarray
+    lrot: np.ndarray | None = None  # (N, J, 4): the dances themselves, on the canonical
+    hips: np.ndarray | None = None  # (N, 3) skeleton, where a dance of phrases is joined
 
     def candidates(self, genre: int) -> np.ndarray:
         """Phrase starts of ``genre``: every ``STRIDE`` frames, the phrase and its blend
@@ -51,9 +58,9 @@ def _music_windows(music: np.ndarray, starts: np.ndarray) -> np.ndarray:
     return music[np.minimum(rows, len(music) - 1)].reshape(len(starts), -1)
 
 
-def _pose_key(motion: np.ndarray, frame: np.ndarray) -> np.ndarray:
+def _pose_key(motion: np.ndarray, frame: np.ndarray, channels: slice = POSE) -> np.ndarray:
     """The pose at ``frame`` and its change from the frame before, to match a join."""
-    now, before = motion[frame, POSE], motion[frame - 1, POSE]
+    now, before = motion[frame, channels], motion[frame - 1, channels]
     return np.concatenate([now, 2.0 * (now - before)], axis=-1)
 
 
@@ -61,8 +68,9 @@ class PhraseSampler:
     """Joins phrases of one library; the candidates' music windows are computed once per
     genre."""
 
-    def __init__(self, library: PhraseLibrary) -> None:
+    def __init__(self, library: PhraseLibrary, channels: slice = POSE) -> None:
         self.library = library
+        self.channels = channels  # of the standardised features matched at a join
         self._genres: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     def _genre(self, genre: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -73,7 +81,7 @@ class PhraseSampler:
             self._genres[genre] = (
                 starts,
                 _music_windows(self.library.music, starts),
-                _pose_key(self.library.motion, starts - 1),
+                _pose_key(self.library.motion, starts - 1, self.channels),
             )
         return self._genres[genre]
 
@@ -96,7 +104,9 @@ class PhraseSampler:
             cost = ((windows - wanted) ** 2).mean(axis=1)
             cost = cost / max(float(np.median(cost)), 1e-9)
             if source >= 0:
-                pose = ((keys - _pose_key(out, np.array([t - 1]))[0]) ** 2).mean(axis=1)
+                pose = ((keys - _pose_key(out, np.array([t - 1]), self.channels)[0]) ** 2).mean(
+                    axis=1
+                )
                 cost = cost + pose / max(float(np.median(pose)), 1e-9)
             recent = (t - last_used[starts] < REUSE_FRAMES) | (
                 t - last_used[starts + PHRASE - 1] < REUSE_FRAMES
@@ -118,3 +128,56 @@ class PhraseSampler:
             source = start + PHRASE  # where this phrase would go on, for the next fade
             t += PHRASE
         return out[:frames], joins
+
+
+def _yaw_angle(q: np.ndarray) -> np.ndarray:
+    fwd = rot.apply(q, np.array([0.0, 0.0, 1.0]))
+    return np.arctan2(fwd[..., 0], fwd[..., 2])
+
+
+def _placed(lib: PhraseLibrary, first: int, stop: int, at: tuple[np.ndarray, float]):
+    """Library frames ``first:stop`` turned about +Y and moved on the floor so that frame
+    ``first``'s hips stand at ``at`` = (position on the floor (3,), heading radians)."""
+    lrot = lib.lrot[first:stop].astype(np.float64)
+    hips = lib.hips[first:stop].astype(np.float64)
+    turn = at[1] - float(_yaw_angle(lrot[0, HIPS]))
+    spin = rot.about_y(np.array(turn))
+    lrot[:, HIPS] = rot.mul(spin[None], lrot[:, HIPS])
+    floor = hips[0] * np.array([1.0, 0.0, 1.0])
+    hips = rot.apply(spin[None], hips - floor) + at[0]
+    return lrot, hips
+
+
+def _where(lrot: np.ndarray, hips: np.ndarray) -> tuple[np.ndarray, float]:
+    return hips * np.array([1.0, 0.0, 1.0]), float(_yaw_angle(lrot[HIPS]))
+
+
+def dance_motion(
+    sampler: PhraseSampler, music: np.ndarray, genre: int, rng: np.random.Generator
+) -> tuple[Motion, list[tuple[int, int]]]:
+    """The phrases :meth:`PhraseSampler.dance` chooses, joined on the dancers' own motion
+    (not its features, whose decoding slides the feet): each phrase turned and moved to
+    start where the last one would have gone on, and cross-faded from that continuation
+    over ``BLEND`` frames (rotations slerped, the hips' position mixed)."""
+    lib = sampler.library
+    _, joins = sampler.dance(music, genre, rng)
+    frames = len(music)
+    lrot = np.empty((frames + PHRASE + BLEND, len(C.JOINTS), 4))
+    hips = np.empty((frames + PHRASE + BLEND, 3))
+    at = (np.zeros(3), 0.0)
+    for k, (t, start) in enumerate(joins):
+        r, h = _placed(lib, start, start + PHRASE + BLEND, at)
+        if k:  # the last phrase's continuation, already written at t..t+BLEND
+            fade = np.linspace(0.0, 1.0, BLEND + 2)[1:-1]
+            lrot[t : t + BLEND] = rot.slerp(lrot[t : t + BLEND], r[:BLEND], fade[:, None])
+            hips[t : t + BLEND] = (1 - fade[:, None]) * hips[t : t + BLEND] + fade[:, None] * h[
+                :BLEND
+            ]
+            lrot[t + BLEND : t + PHRASE + BLEND] = r[BLEND:]
+            hips[t + BLEND : t + PHRASE + BLEND] = h[BLEND:]
+        else:
+            lrot[t : t + PHRASE + BLEND], hips[t : t + PHRASE + BLEND] = r, h
+        at = _where(r[PHRASE], h[PHRASE])  # the continuation's frame: the next phrase's start
+    lpos = np.broadcast_to(C.SKELETON.offsets, (frames, len(C.JOINTS), 3)).copy()
+    lpos[:, HIPS] = hips[:frames]
+    return Motion(C.SKELETON, DF.FPS, rot.normalize(lrot[:frames]), lpos), joins

@@ -6,6 +6,7 @@ music they were danced to. Everything else is the shipped engine's.
 
     python -m training.dance_phrases_study OUT.json --first-seed 48     # 13a, rule 30
     python -m training.dance_phrases_study OUT.json --first-seed 60 --no-foot-cleanup  # 13b
+    python -m training.dance_phrases_study OUT.json --first-seed 72 --motion-space  # 13c
 """
 
 from __future__ import annotations
@@ -17,22 +18,67 @@ from dataclasses import replace
 
 import numpy as np
 
+import service.engines.dance as E
+from motion import beat_warp as BW
+from motion import dance_features as DF
 from motion import dance_phrases as DP
+from motion.anatomy import hinged
 from training.dance import FOLDS
 from training.dance_data import prepare
 
 
-def fold_library(engine, fold: int) -> DP.PhraseLibrary:
-    """The fold's training songs (and the CMU dances of the genres without music)."""
+def real_dances() -> dict:
+    """Each aligned song's real dance on the song's clock, the frames of its sequence."""
+    from training import dance_alignment as DA
+    from training.dance_data import retime
+    from training.data import load_dance_with_melody
+
+    table, out = DA.load_table(), {}
+    for clip in load_dance_with_melody():
+        alignment = DA.alignment_for(clip.name, table)
+        if alignment is not None:
+            out[clip.name] = retime(clip.motion, alignment.rate)
+    return out
+
+
+def fold_library(engine, fold: int, motion_space: bool = False) -> DP.PhraseLibrary:
+    """The fold's training songs (and the CMU dances of the genres without music; with
+    ``motion_space``, the songs only, each with its dance itself)."""
     seqs = [s for s in prepare(log=lambda *a: None) if s.name not in FOLDS[fold]]
-    motion, music, genre, song = [], [], [], []
+    dances = real_dances() if motion_space else {}
+    if motion_space:
+        seqs = [s for s in seqs if s.name in dances]
+    motion, music, genre, song, lrot, hips = [], [], [], [], [], []
     for i, s in enumerate(seqs):
         code, _ = engine.encode(engine.stats.normalize_audio(s.audio))
         motion.append(engine.stats.normalize_motion(s.motion).astype(np.float32))
         music.append(code.astype(np.float32))
         genre.append(np.full(len(s.motion), s.genre))
         song.append(np.full(len(s.motion), i))
-    return DP.PhraseLibrary(*(np.concatenate(x) for x in (motion, music, genre, song)))
+        if motion_space:
+            real = dances[s.name]
+            assert real.num_frames == len(s.motion), s.name
+            lrot.append(real.lrot.astype(np.float32))
+            hips.append(real.lpos[:, DP.HIPS].astype(np.float32))
+    arrays = [np.concatenate(x) for x in (motion, music, genre, song)]
+    if motion_space:
+        arrays += [np.concatenate(lrot), np.concatenate(hips)]
+    return DP.PhraseLibrary(*arrays)
+
+
+def dance_of_phrases(engine, job, music, genre: str, probs: dict, motion):
+    """The engine's steps after the rollout that a dance of real motion keeps: the hinge
+    limits and the beat warp (no low-pass, standstills or foot clean-up)."""
+    warnings = []
+    if job.genre is None:
+        warnings.append(f"genre not given: predicted {genre} (p = {probs[genre]:.2f})")
+    tempo, beats, pulses = music.features.for_genre(genre)
+    motion = hinged(motion)
+    if job.beat_warp and len(beats) >= 2:
+        motion = BW.warp_to_beats(motion, pulses).motion
+    bas, chance = BW.alignment(motion, beats)
+    return E.DanceResult(motion, genre, probs, job.genre is not None, tempo, beats, bas,
+                         chance, warnings)  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -46,7 +92,6 @@ def main(argv: list[str] | None = None) -> None:
     )
     a = p.parse_args(argv)
 
-    import service.engines.dance as E
     from training import eval_dance as ED
 
     samplers: dict[int, DP.PhraseSampler] = {}
@@ -65,7 +110,28 @@ def main(argv: list[str] | None = None) -> None:
         )
         return poses
 
+    def predict(self, job, timer):
+        fold = 1 if "fold1" in self.entry.name else 0
+        if fold not in samplers:
+            samplers[fold] = DP.PhraseSampler(fold_library(self, fold, True), DP.KEY)
+        music = self._music(job, timer)
+        code, probs = self.encode(music.x)
+        probs = {g: float(p) for g, p in zip(DF.MUSIC_GENRES, probs, strict=True)}
+        genre = job.genre or max(probs, key=probs.get)
+        motion, joins = DP.dance_motion(samplers[fold], code, DF.genre_index(genre),
+                                        np.random.default_rng(music.noise_seed))  # fmt: skip
+        count(joins)
+        return dance_of_phrases(self, job, music, genre, probs, motion)
+
+    def count(joins):
+        runs["phrases"] += len(joins)
+        runs["continued"] += sum(
+            b == a + DP.PHRASE for (_, a), (_, b) in zip(joins, joins[1:], strict=False)
+        )
+
     E.DanceEngine.rollout = rollout
+    if a.motion_space:
+        E.DanceEngine.predict = predict
     if a.no_foot_cleanup:
         dance = E.DanceEngine._dance
 
