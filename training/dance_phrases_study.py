@@ -90,6 +90,11 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="the phrases' own feet, not the engine's clean-up (rule 31)",
     )
+    p.add_argument(
+        "--motion-space",
+        action="store_true",
+        help="phrases joined on the dancers' own motion, not decoded features (rule 32)",
+    )
     a = p.parse_args(argv)
 
     from training import eval_dance as ED
