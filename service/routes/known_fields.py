@@ -29,7 +29,9 @@ def declared_fields(dependant: Dependant) -> tuple[frozenset[str], frozenset[str
 
 
 async def only_known_fields(request: Request) -> None:
-    """400 naming every query parameter and form field the route does not read."""
+    """400 naming every query parameter and form field the route does not read, and saying
+    where a name belongs when it came in the other place (``-F format=glb`` for the query
+    parameter ``?format=glb``)."""
     route = request.scope.get("route")
     dependant = getattr(route, "dependant", None)
     if dependant is None:
@@ -38,15 +40,27 @@ async def only_known_fields(request: Request) -> None:
     if key not in _DECLARED:
         _DECLARED[key] = declared_fields(dependant)
     query, form = _DECLARED[key]
-    unknown = sorted(set(request.query_params) - query)
+    in_query = set(request.query_params) - query
+    in_form: set[str] = set()
     media = request.headers.get("content-type", "")
     if media.startswith(("multipart/form-data", "application/x-www-form-urlencoded")):
-        unknown += sorted(set((await request.form()).keys()) - form - set(unknown))
+        in_form = set((await request.form()).keys()) - form
+    misplaced = sorted((in_query & form) | (in_form & query))
+    unknown = sorted((in_query | in_form) - set(misplaced))
+    if not (unknown or misplaced):
+        return
+    parts = []
     if unknown:
-        known = sorted(query | form)
-        raise InvalidRequest(
-            f"unknown field{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
-            f"this endpoint reads {', '.join(known)}",
-            unknown=unknown,
-            known=known,
-        )
+        s = "s" if len(unknown) > 1 else ""
+        parts.append(f"unknown field{s} {', '.join(map(repr, unknown))}")
+    for name in misplaced:
+        where = f"the query string (?{name}=...)" if name in query else "the form"
+        parts.append(f"{name!r} is read from {where}, not from where it was sent")
+    known = sorted(query | form)
+    raise InvalidRequest(
+        f"{'; '.join(parts)}; this endpoint reads the form fields {', '.join(sorted(form))}"
+        + (f" and the query parameters {', '.join(sorted(query))}" if query else ""),
+        unknown=unknown,
+        misplaced=misplaced,
+        known=known,
+    )

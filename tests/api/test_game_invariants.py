@@ -170,6 +170,18 @@ def test_an_unknown_form_field_is_a_400_that_names_it(shared_client, path, field
     assert "root_motion" in body["known"]
 
 
+def test_a_query_parameter_sent_as_a_form_field_is_a_400_that_says_where_it_goes(shared_client):
+    clip = bvh.dumps(rigs.load_fixture().slice(0, 40))
+    response = shared_client.post(
+        "/v1/stylize",
+        files={"content": ("c.bvh", clip)},
+        data={"style_name": "happy", "format": "json"},
+    )
+    body = assert_problem(response, 400, "invalid-request")
+    assert body["misplaced"] == ["format"] and body["unknown"] == []
+    assert "?format=" in body["detail"] and "unknown field" not in body["detail"]
+
+
 def test_an_unknown_query_parameter_is_a_400_and_bad_values_are_too(shared_client):
     clip = bvh.dumps(rigs.load_fixture().slice(0, 40))
     send = {"files": {"content": ("c.bvh", clip)}, "data": {"style_name": "happy"}}
