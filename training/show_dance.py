@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from motion.skeleton import Motion
-from training.show_styles import CELL, LABEL, strip, views
+from training.show_styles import document
 
 REPO = Path(__file__).resolve().parent.parent
 COLUMNS = 8
@@ -30,19 +30,12 @@ COLUMNS = 8
 def render(rows: list[tuple[str, Motion]], start: float, seconds: float, title: str) -> str:
     """An SVG document of film strips, one per ``(label, canonical motion)``, each showing
     :data:`COLUMNS` poses from ``start`` over ``seconds``."""
-    height = 40 + CELL * len(rows)
-    width = LABEL + CELL * COLUMNS + 10
-    body = [f'<text x="8" y="22" font-size="15" font-weight="bold">{title}</text>']
     times = start + np.arange(COLUMNS) * seconds / COLUMNS
-    for r, (label, motion) in enumerate(rows):
-        frames = np.clip(np.round(times * motion.fps).astype(int), 0, motion.num_frames - 1)
-        body += strip(*views(motion, frames), 30 + r * CELL, label)
-    return (
-        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-        f'font-family="sans-serif"><rect width="100%" height="100%" fill="white"/>'
-        + "".join(body)
-        + "</svg>\n"
-    )
+    return document(
+        [(label, motion, np.clip(np.round(times * motion.fps).astype(int), 0, motion.num_frames - 1))
+         for label, motion in rows],
+        title,
+    )  # fmt: skip
 
 
 def phrases(seed: int = 0) -> list[tuple[str, Motion]]:

@@ -94,15 +94,13 @@ def strip(side: np.ndarray, front: np.ndarray, y0: float, label: str) -> list[st
     return out
 
 
-def render(rows: list[tuple[str, Motion]], title: str) -> str:
-    """An SVG document of film strips, one per ``(label, canonical motion)``, the content
-    first."""
+def document(rows: list[tuple[str, Motion, np.ndarray]], title: str) -> str:
+    """An SVG document of film strips, one per ``(label, canonical motion, frames)``, each
+    showing the motion at those frames."""
+    width = LABEL + CELL * max(len(frames) for _, _, frames in rows) + 10
     height = 40 + CELL * len(rows)
-    width = LABEL + CELL * COLUMNS + 10
     body = [f'<text x="8" y="22" font-size="15" font-weight="bold">{title}</text>']
-    first = 1 if is_t_pose(rows[0][1]) else 0  # the content's, for every row
-    for r, (label, motion) in enumerate(rows):
-        frames = np.linspace(first, motion.num_frames - 1, COLUMNS).round().astype(int)
+    for r, (label, motion, frames) in enumerate(rows):
         body += strip(*views(motion, frames), 30 + r * CELL, label)
     return (
         f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
@@ -110,6 +108,17 @@ def render(rows: list[tuple[str, Motion]], title: str) -> str:
         + "".join(body)
         + "</svg>\n"
     )
+
+
+def render(rows: list[tuple[str, Motion]], title: str) -> str:
+    """An SVG document of film strips, one per ``(label, canonical motion)``, the content
+    first."""
+    first = 1 if is_t_pose(rows[0][1]) else 0  # the content's, for every row
+    return document(
+        [(label, motion, np.linspace(first, motion.num_frames - 1, COLUMNS).round().astype(int))
+         for label, motion in rows],
+        title,
+    )  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
