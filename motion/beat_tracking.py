@@ -313,9 +313,11 @@ def track_beats(
 
 
 def _local_score(onset: np.ndarray, period: float) -> np.ndarray:
+    """``onset`` smoothed by a Gaussian of a 32nd of a beat, one value per frame (numpy's
+    ``mode="same"`` returns the kernel's length for an envelope shorter than the kernel)."""
     reach = round(period)
     kernel = np.exp(-0.5 * (np.arange(-reach, reach + 1) * 32.0 / period) ** 2)
-    return np.convolve(onset, kernel, mode="same")
+    return np.convolve(onset, kernel, mode="full")[reach : reach + len(onset)]
 
 
 def _beat_dp(

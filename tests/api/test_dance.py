@@ -99,6 +99,13 @@ def test_dance_lasts_as_long_as_the_audio(client):
     assert r.headers["x-model-version"].startswith("dance-dwm/")
 
 
+@pytest.mark.parametrize("seconds", [0.3, 0.5, 0.9])
+def test_a_song_of_under_a_second_dances_all_of_it(client, seconds):
+    r = post(client, click_wav(seconds), genre="tango", query="?format=json")
+    assert r.status_code == 200, r.text
+    assert r.json()["frames"] == math.ceil(seconds * 30 - 1e-9)
+
+
 def test_fps_json_and_predicted_genre(client):
     r = post(client, click_wav(3.1, fmt="FLAC"), name="s.flac", media="audio/flac",
              query="?format=json", fps=24)  # fmt: skip

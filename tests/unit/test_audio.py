@@ -369,6 +369,26 @@ def test_click_track_tempo_and_beats(bpm):
     assert (around > 0.5 * features.onset.max()).all()
 
 
+@pytest.mark.parametrize("seconds", [0.2, 0.35, 0.5, 0.7, 1.0])
+def test_a_song_shorter_than_two_beats_gets_features_for_every_frame(seconds):
+    # under two beat periods the smoothing kernel outgrew the onset envelope, and the
+    # tracker indexed past its per-frame periods (a 500 on POST /v1/dance)
+    samples, _ = _click_track(120.0, seconds=seconds, first=0.05)
+    features = audio_features.frame_features(samples, SR, 30.0)
+    assert features.matrix().shape == (math.ceil(seconds * 30.0 - 1e-9), audio_features.FEATURE_DIM)
+    assert np.isfinite(features.matrix()).all()
+    assert ((features.beats >= 0) & (features.beats <= seconds)).all()
+
+
+def test_the_onset_smoothing_keeps_the_envelope_length_and_centre():
+    onset = np.zeros(40)
+    onset[20] = 1.0
+    for period in (5.0, 30.0, 100.0):  # kernels shorter and longer than the envelope
+        local = beat_tracking._local_score(onset, period)
+        assert local.shape == onset.shape
+        assert int(np.argmax(local)) == 20
+
+
 def test_beat_phase_rises_from_zero_at_each_beat():
     beats = np.array([1.0, 1.5, 2.0, 2.6, 3.1])
     fps = 50.0
