@@ -88,7 +88,7 @@ def tempo_curve(
     :data:`LOCAL_TEMPO_SECONDS` around each second, its best lag within
     :data:`LOCAL_TEMPO_RANGE` of the global one, median-filtered over 5 s, so a tempo change
     is followed without leaving the octave. ``bpm`` is 0.0 (and ``period`` empty) when the
-    envelope has no onsets.
+    envelope has no onsets or is too short to hold one beat at ``max_bpm``.
 
     With ``level_bpm`` (the tempo a dance genre steps, :data:`GENRE_TEMPO`) the metrical
     level is chosen as a listener who knows the dance would: among the global tempo's
@@ -108,6 +108,8 @@ def tempo_curve(
         bpms = 60.0 * frame_rate / lags
     log_prior = -0.5 * ((np.log2(bpms[1:]) - np.log2(start_bpm)) / std_octaves) ** 2
     log_prior = np.concatenate([[-np.inf], np.where(bpms[1:] < max_bpm, log_prior, -np.inf)])
+    if not np.isfinite(log_prior).any():  # too short to hold one beat at max_bpm
+        return Tempo(0.0, np.zeros(0))
     lag = _refined_peak(np.log1p(1e6 * mean_ac) + log_prior, int(np.argmax(log_prior)))
     period = _local_periods(sums, lag, block, len(onset), frame_rate)
     found = Tempo(float(60.0 * frame_rate / lag), period, sums, block)
@@ -286,7 +288,7 @@ def track_beats(
     ``genre`` (a key of :data:`GENRE_TEMPO`) the metrical level is the one a dancer of that
     genre steps (:func:`tempo_curve`'s ``level_bpm``). ``tempo``: the envelope's
     :func:`tempo_curve`, when already known. Returns
-    ``(0.0, [])`` when there are no onsets. Frame ``t`` of the envelope is time
+    ``(0.0, [])`` when there are no onsets or no tempo is found. Frame ``t`` of the envelope is time
     ``t / frame_rate``.
     """
     onset = np.asarray(onset, dtype=np.float64)
@@ -299,6 +301,8 @@ def track_beats(
         if genre in GENRE_TEMPO:
             estimate = at_level(estimate, GENRE_TEMPO[genre], frame_rate)
         bpm_found, periods = estimate.bpm, estimate.period
+        if bpm_found <= 0:
+            return 0.0, np.zeros(0)
     else:
         bpm_found = float(bpm)
         if not bpm_found > 0:

@@ -99,7 +99,7 @@ def test_dance_lasts_as_long_as_the_audio(client):
     assert r.headers["x-model-version"].startswith("dance-dwm/")
 
 
-@pytest.mark.parametrize("seconds", [0.3, 0.5, 0.9])
+@pytest.mark.parametrize("seconds", [0.05, 0.1, 0.3, 0.5, 0.9])
 def test_a_song_of_under_a_second_dances_all_of_it(client, seconds):
     r = post(client, click_wav(seconds), genre="tango", query="?format=json")
     assert r.status_code == 200, r.text

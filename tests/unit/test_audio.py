@@ -369,10 +369,11 @@ def test_click_track_tempo_and_beats(bpm):
     assert (around > 0.5 * features.onset.max()).all()
 
 
-@pytest.mark.parametrize("seconds", [0.2, 0.35, 0.5, 0.7, 1.0])
+@pytest.mark.parametrize("seconds", [0.02, 0.05, 0.1, 0.15, 0.2, 0.35, 0.5, 0.7, 1.0])
 def test_a_song_shorter_than_two_beats_gets_features_for_every_frame(seconds):
     # under two beat periods the smoothing kernel outgrew the onset envelope, and the
-    # tracker indexed past its per-frame periods (a 500 on POST /v1/dance)
+    # tracker indexed past its per-frame periods; under one beat at the fastest tempo no
+    # lag was left and it divided by zero (each a 500 on POST /v1/dance)
     samples, _ = _click_track(120.0, seconds=seconds, first=0.05)
     features = audio_features.frame_features(samples, SR, 30.0)
     assert features.matrix().shape == (math.ceil(seconds * 30.0 - 1e-9), audio_features.FEATURE_DIM)
