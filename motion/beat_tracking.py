@@ -287,9 +287,8 @@ def track_beats(
     followed), or constant when ``bpm`` is given (then this is librosa's tracker). With a
     ``genre`` (a key of :data:`GENRE_TEMPO`) the metrical level is the one a dancer of that
     genre steps (:func:`tempo_curve`'s ``level_bpm``). ``tempo``: the envelope's
-    :func:`tempo_curve`, when already known. Returns
-    ``(0.0, [])`` when there are no onsets or no tempo is found. Frame ``t`` of the envelope is time
-    ``t / frame_rate``.
+    :func:`tempo_curve`, when already known. Returns ``(0.0, [])`` when there are no onsets
+    or no tempo is found. Frame ``t`` of the envelope is time ``t / frame_rate``.
     """
     onset = np.asarray(onset, dtype=np.float64)
     if onset.ndim != 1:

@@ -135,8 +135,8 @@ def load_prepared(path: Path) -> list[Sequence]:
     with np.load(path) as z:
         meta = json.loads(str(z["meta"]))
         return [
-            Sequence(m["name"], m["genre"], z[f"a{i}"].astype(np.float32),
-                     z[f"m{i}"].astype(np.float32), m["music"], m["trusted"])
+            Sequence(m["name"], m["genre"], z[f"a{i}"].astype(np.float32, copy=False),
+                     z[f"m{i}"].astype(np.float32, copy=False), m["music"], m["trusted"])
             for i, m in enumerate(meta)
         ]  # fmt: skip
 
