@@ -172,6 +172,25 @@ def dance_contacts(gpos: np.ndarray, fps: float = FPS) -> np.ndarray:
     return CT.clean_contacts(low & slow, min_frames)
 
 
+FLOOR_SMOOTH_SECONDS = 0.5  # Gaussian sigma of a take's floor, followed as it drifts
+
+
+def level_floor(motion: Motion) -> Motion:
+    """A canonical dance with its floor at height 0 throughout: the lowest foot joint's
+    height over a sliding ``GROUND_WINDOW_SECONDS``, smoothed, taken off the hips. The Dance
+    with Melody takes' floors lie up to 13 cm apart and drift within a take; measured on
+    one clip-wide ground level, a foot on a raised stretch of floor counts as in the air."""
+    from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+
+    feet = K.global_positions(motion)[:, FOOT_JOINTS, 1].min(axis=1)
+    window = max(1, int(round(GROUND_WINDOW_SECONDS * motion.fps)) | 1)
+    floor = minimum_filter1d(feet, window, mode="nearest")
+    floor = gaussian_filter1d(floor, FLOOR_SMOOTH_SECONDS * motion.fps, mode="nearest")
+    lpos = motion.lpos.copy()
+    lpos[:, HIPS, 1] -= floor
+    return motion.replace(lpos=lpos)
+
+
 def encode(motion: Motion, contacts: np.ndarray | None = None) -> Encoded:
     """The encoding of a canonical motion at 30 fps; ``contacts (F, 4)`` default to
     :func:`dance_contacts`."""

@@ -33,7 +33,9 @@ a beat). Parts:
   :func:`genre_features`, relative to the hips' floor point) trained on the real dances of
   the training songs names the genre of dances generated for the held-out songs with each
   of the four genres requested;
-- **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s) and EDGE's physical
+- **foot sliding** (``motion.contacts.canonical_foot_sliding``, cm/s; again with each dance's
+  floor levelled, ``motion.dance_features.level_floor``, where a real take's drifting floor
+  no longer hides its sliding feet) and EDGE's physical
   foot contact score (``training.dance_metrics.physical_foot_contact``) of those dances and
   of the real held-out dances, and by half the legs' jerk (``training.judges.jerk``: how
   much the feet's clean-up makes the legs jitter) of the dances in their song's genre;
@@ -334,6 +336,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
     table = DA.load_table()["dances"]
     rows = {k: [] for k in ("real", "generated", "generated_no_warp", "generated_reference")}
     sliding = {"real": [], "generated": []}
+    sliding_levelled = {"real": [], "generated": []}  # on a floor put at 0 throughout
     contact = {"real": [], "generated": []}
     by_half = {h: {m: {"real": [], "generated": []} for m in ("sliding", "contact", "legs_jerk")}
                for h in DM.HALVES}  # fmt: skip
@@ -345,6 +348,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
         hinges[kind]["knees"] += int(anatomy.knees_backwards(motion).sum())
         hinges[kind]["elbows"] += int(anatomy.elbows_backwards(motion).sum())
         sliding[kind].append(CT.canonical_foot_sliding(motion))
+        sliding_levelled[kind].append(CT.canonical_foot_sliding(DF.level_floor(motion)))
         contact[kind].append(DM.physical_foot_contact(motion))
         for h, part in halves_of(motion):
             by_half[h]["sliding"][kind].append(CT.canonical_foot_sliding(part))
@@ -416,6 +420,9 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
             for k, v in rows.items()
         },  # fmt: skip
         "foot_sliding_cm_s": {k: round(float(np.mean(v)), 2) for k, v in sliding.items()},
+        "foot_sliding_levelled_cm_s": {
+            k: round(float(np.mean(v)), 2) for k, v in sliding_levelled.items()
+        },
         "foot_contact_score": {k: round(float(np.mean(v)), 3) for k, v in contact.items()},
         "feet_by_half": {
             h: {
@@ -440,6 +447,7 @@ def held_out(engine, seeds: int, log=print, takes=None, first_seed: int = 0) -> 
         "_pooling": {
             "generated": generated_dances,
             "sliding": sliding,
+            "sliding_levelled": sliding_levelled,
             "contact": contact,
             "legs_jerk": {h: m["legs_jerk"] for h, m in by_half.items()},
             "hinges": hinges,
@@ -526,6 +534,7 @@ def by_fold(folds: list[tuple]) -> dict:
             "songs": songs,
             "genre": part["genre_accuracy"]["by_half"],
             "foot_sliding_cm_s": part["foot_sliding_cm_s"],
+            "foot_sliding_levelled_cm_s": part["foot_sliding_levelled_cm_s"],
             "foot_contact_score": part["foot_contact_score"],
             "songs_on_the_beat": sum(song_passes(s) for s in part["songs"].values()),
             "whole_songs": whole_song_figures(pooling["whole_songs"]),
@@ -535,7 +544,8 @@ def by_fold(folds: list[tuple]) -> dict:
     held, rest = held_out_songs(every, audio=False)  # the distances need no music
     generated = {n: d for _, pooling, _ in folds for n, d in pooling["generated"].items()}
     feet = {m: {k: round(float(np.mean([x for _, p, _ in folds for x in p[m][k]])), 3)
-                for k in ("real", "generated")} for m in ("sliding", "contact")}  # fmt: skip
+                for k in ("real", "generated")}
+            for m in ("sliding", "sliding_levelled", "contact")}  # fmt: skip
     legs_jerk = {h: {k: round(float(np.mean([x for _, p, _ in folds for x in p["legs_jerk"][h][k]])), 1)
                      for k in ("real", "generated")} for h in DM.HALVES}  # fmt: skip
     pooled = {
@@ -543,6 +553,7 @@ def by_fold(folds: list[tuple]) -> dict:
         "genre": {h: genre_accuracy(_summed([p["genre_accuracy"]["by_half"][h]["confusion"]
                                              for _, _, p in folds])) for h in DM.HALVES},
         "foot_sliding_cm_s": feet["sliding"],
+        "foot_sliding_levelled_cm_s": feet["sliding_levelled"],
         "foot_contact_score": feet["contact"],
         "legs_jerk_m_s3": legs_jerk,
         "hinges_backwards": hinges_backwards({k: {m: sum(p["hinges"][k][m] for _, p, _ in folds)
@@ -798,6 +809,7 @@ def _held_out_lines(report: dict) -> list[str]:
             ),
         ]
     ba, pfc = report["beat_alignment"], report["foot_contact_score"]
+    levelled = report["foot_sliding_levelled_cm_s"]
     first = report.get("first_seed", 0)
     seeds = f"{report['seeds']} seeds" + (f" from seed {first}" if first else "")
     lines += [
@@ -806,18 +818,19 @@ def _held_out_lines(report: dict) -> list[str]:
         "dance covers; against the tracker's beats at the level of the song's genre):",
         "",
         "| dance | beat alignment | chance (shifted beats) | foot sliding (cm/s) "
-        "| foot contact score |",
-        "|---|---|---|---|---|",
+        "| on a levelled floor | foot contact score |",
+        "|---|---|---|---|---|---|",
         f"| real | {ba['real']['bas']:.3f} | {ba['real']['chance']:.3f} | "
-        f"{report['foot_sliding_cm_s']['real']:.1f} | {pfc['real']:.3f} |",
+        f"{report['foot_sliding_cm_s']['real']:.1f} | {levelled['real']:.1f} | "
+        f"{pfc['real']:.3f} |",
         f"| generated (as served) | {ba['generated']['bas']:.3f} | "
         f"{ba['generated']['chance']:.3f} | {report['foot_sliding_cm_s']['generated']:.1f} | "
-        f"{pfc['generated']:.3f} |",
+        f"{levelled['generated']:.1f} | {pfc['generated']:.3f} |",
         f"| generated, no beat warp | {ba['generated_no_warp']['bas']:.3f} | "
-        f"{ba['generated_no_warp']['chance']:.3f} | - | - |",
+        f"{ba['generated_no_warp']['chance']:.3f} | - | - | - |",
         f"| generated, against the beats at the danced tempo | "
         f"{ba['generated_reference']['bas']:.3f} | {ba['generated_reference']['chance']:.3f} "
-        "| - | - |",
+        "| - | - | - |",
         "",
         "Foot contact score: EDGE's physical foot contact score (x 10^4, 5-s pieces; lower: "
         "the hips accelerate only while a foot is planted).",

@@ -41,6 +41,29 @@ def test_encoding_ignores_heading_and_place(walk):
     np.testing.assert_allclose(moved, DF.encode(walk).features, atol=2e-4)
 
 
+def test_level_floor_puts_a_drifting_floor_at_zero(walk):
+    """A take whose floor rises 10 cm over its length and has a 5-cm step in the middle
+    stands on height 0 throughout once levelled: no foot counts as in the air because its
+    stretch of floor lies higher, and its sliding is measured on every step."""
+    from motion import contacts as CT
+
+    walking = walk.replace(lrot=np.tile(walk.lrot, (8, 1, 1)), lpos=np.tile(walk.lpos, (8, 1, 1)))
+    frames = walking.num_frames  # 16 s: room for the floor's 2-s windows either side of a step
+    feet = K.global_positions(walking)[:, DF.FOOT_JOINTS, 1].min(axis=1)
+    drift = np.linspace(0.0, 10.0, frames) + np.where(np.arange(frames) >= frames // 2, 5.0, 0.0)
+    lpos = walking.lpos.copy()
+    lpos[:, DF.HIPS, 1] += drift - feet.min()
+    drifting = walking.replace(lpos=lpos)
+    level = K.global_positions(DF.level_floor(drifting))[:, DF.FOOT_JOINTS, 1].min(axis=1)
+    window = int(DF.GROUND_WINDOW_SECONDS * walk.fps)
+    steady = np.r_[window : frames // 2 - window, frames // 2 + window : frames - window]
+    own = feet - feet.min()  # the walk's own lowest foot over its floor, cm
+    assert np.abs(level - own)[steady].max() < 1.5  # the drift and the step are gone
+    assert np.abs(drift - drift[0])[steady].max() > 10.0
+    raw, levelled = (CT.canonical_foot_sliding(m) for m in (drifting, DF.level_floor(drifting)))
+    assert levelled > raw  # the raised stretch's steps count again
+
+
 def test_song_features_use_the_song_beats():
     sr = 22050
     y = (0.1 * np.sin(2 * np.pi * 440 * np.arange(3 * sr) / sr)).astype(np.float32)
@@ -390,6 +413,8 @@ def test_evaluation_runs_end_to_end_on_the_shipped_dance(tmp_path, monkeypatch):
     ba = report["beat_alignment"]
     assert ba["generated"]["n"] == ba["generated_no_warp"]["n"] == 2 and ba["real"]["n"] == 1
     assert all(0.0 <= r["bas"] <= 1.0 for r in ba.values())
+    levelled = report["foot_sliding_levelled_cm_s"]  # the take's drifting floor hid steps
+    assert levelled["real"] > report["foot_sliding_cm_s"]["real"] and levelled["generated"] > 0
     genre = report["genre_accuracy"]
     assert genre["n_generated"] == 2 * 4  # every genre asked, per seed
     assert sum(sum(r.values()) for r in genre["confusion"].values()) == 8
@@ -575,6 +600,11 @@ def test_folds_are_judged_each_on_its_own_songs_and_pooled(tmp_path, monkeypatch
     assert pooled["speed_against_genre"]["slowest"]["share"] == min(
         s["slowest"]["share"] for s in speeds
     )
+    for kind in ("real", "generated"):  # each fold's one dance of each kind, averaged
+        per_fold = [r["foot_sliding_levelled_cm_s"][kind] for r in rows]
+        assert pooled["foot_sliding_levelled_cm_s"][kind] == pytest.approx(
+            np.mean(per_fold), abs=0.01
+        )
     jerks = {h: pooled["legs_jerk_m_s3"][h] for h in ("dev", "test")}
     assert all(v["real"] > 0 and v["generated"] > 0 for v in jerks.values())
     text = ED.markdown(report)
