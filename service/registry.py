@@ -269,6 +269,12 @@ class ModelRegistry:
                     library=library,
                     libraries=sorted(e.library for e in engines),
                 )
+        spelled = {}
+        for i, (library, style) in enumerate(wanted):
+            spelling = self._spelling(family, library, style, engines)
+            if spelling != style:
+                spelled[style] = spelling
+                wanted[i] = (library, spelling)
         offering = [
             [e for e in engines if (lib is None or _answers_to(e, lib)) and e.offers(style)]
             for lib, style in wanted
@@ -291,7 +297,7 @@ class ModelRegistry:
                 raise refusing.refusal(style_names.only(request, style))
         serving = [e for e in engines if all(e in offer for offer in offering)]
         if serving:
-            return serving[0], style_names.bare(request)
+            return serving[0], style_names.bare(request, spelled)
         owners = {name: offer[0].library for name, offer in zip(names, offering, strict=True)}
         raise InvalidRequest(
             "the styles of a mix must come from one model (two models' codes do not share "
@@ -299,6 +305,20 @@ class ModelRegistry:
             field="style_mix",
             libraries=owners,
         )
+
+    def _spelling(self, family: str, library: str | None, style: str, engines: list[Engine]) -> str:
+        """``style`` as the models of ``library`` (any, without one) spell it: as given where
+        one offers it so or a style is registered so, else the one shipped name it spells
+        in another case, else a registered one (their names are lower case), else as given
+        (for the 404)."""
+        candidates = [e for e in engines if library is None or _answers_to(e, library)]
+        registered = family == "translator" and library is None
+        if any(e.offers(style) for e in candidates) or (registered and style in self.registered):
+            return style
+        found = {e.spelling(style) for e in candidates} - {None}
+        if len(found) == 1:
+            return found.pop()
+        return style.lower() if registered and style.lower() in self.registered else style
 
     def _ambiguous(
         self,

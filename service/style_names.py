@@ -7,7 +7,8 @@ shipped models; the model's full name, ``translator-bandai``, works as well). Th
 picks the family, so ``bandai:happy`` names the translator's style on ``/v1/transfer`` and
 the fast network's on ``/v1/stylize``. A bare name works while one model of the family offers
 it (:meth:`service.registry.ModelRegistry.resolve` says what happens otherwise). Style names
-never hold ``:``, library names may: the last ``:`` separates them.
+never hold ``:``, library names may: the last ``:`` separates them. A style's name is
+matched whatever its case ("Angry" names ``angry``), where only one style so spelled exists.
 """
 
 from __future__ import annotations
@@ -39,18 +40,25 @@ def requested(request: Any) -> list[str]:
     return names() if callable(names) else []
 
 
-def bare(request: Any) -> Any:
-    """``request`` with every style name it asks for without its ``library:`` (weights of a
-    mix that named one style twice, once with its library, added up)."""
+def bare(request: Any, spelled: dict[str, str] | None = None) -> Any:
+    """``request`` with every style name it asks for without its ``library:``, and spelled
+    as ``spelled`` says (bare name as asked -> as the model spells it; weights of a mix that
+    named one style twice, with and without its library or in two cases, added up)."""
+    spelled = spelled or {}
+
+    def plain(name: str) -> str:
+        style = split(name)[1]
+        return spelled.get(style, style)
+
     if isinstance(request, StylizeRequest):
-        return dataclasses.replace(request, style_name=split(request.style_name)[1])
+        return dataclasses.replace(request, style_name=plain(request.style_name))
     style = request.style
     if style.name is not None:
-        style = dataclasses.replace(style, name=split(style.name)[1])
+        style = dataclasses.replace(style, name=plain(style.name))
     elif style.mix:
         mix: dict[str, float] = {}
         for name, weight in style.mix.items():
-            key = split(name)[1]
+            key = plain(name)
             mix[key] = mix.get(key, 0.0) + weight
         style = dataclasses.replace(style, mix=mix)
     return dataclasses.replace(request, style=style)

@@ -213,6 +213,18 @@ class Engine:
         """Whether a request may name the style ``name`` (a bare name) of this model."""
         return self.style_of(name) is not None
 
+    def spelling(self, name: str) -> str | None:
+        """The name (or other name) of a shipped style that ``name`` spells in another case
+        ("Angry" for "angry"), or None: none, or several that differ only in case."""
+        folded = name.casefold()
+        found = {
+            spelled
+            for style in self.styles()
+            for spelled in (style["name"], *style.get("also_named", ()))
+            if spelled.casefold() == folded
+        }
+        return found.pop() if len(found) == 1 else None
+
     # --- requests -------------------------------------------------------------------------
 
     def accepts(self, request: Any) -> bool:

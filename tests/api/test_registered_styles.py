@@ -179,6 +179,8 @@ def test_a_name_is_registered_once_and_deleted_once(client, styles_dir):
     assert (styles_dir / "twice.json").is_file()
     body = assert_problem(register(client, "twice", clip), 409, "conflict")
     assert "registered already" in body["detail"]
+    named = [transfer(client, style_name=name) for name in ("twice", "Twice")]  # any case
+    assert named[0].status_code == named[1].status_code == 200 and named[0].text == named[1].text
     assert client.delete("/v1/styles/twice").status_code == 204
     assert not (styles_dir / "twice.json").exists()
     assert_problem(client.delete("/v1/styles/twice"), 404, "not-found")

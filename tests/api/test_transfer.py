@@ -105,6 +105,31 @@ def test_styles_are_listed(shared_client):
 
 
 @needs_model
+def test_shipped_style_names_match_whatever_their_case(shared_client, walk):
+    """A user who types "Elderly" gets the shipped ``elderly``: the same answer as the
+    model's own spelling, on both families and in a mix, where both spellings add up."""
+    style = STYLES[0]
+    asked = style.upper()
+    assert asked != style
+    same = transfer(shared_client, walk, style_name=style)
+    upper = transfer(shared_client, walk, style_name=asked)
+    assert same.status_code == upper.status_code == 200 and upper.text == same.text
+    mix = transfer(shared_client, walk, style_mix=json.dumps({asked: 1, style: 1}))
+    assert mix.status_code == 200 and mix.text == same.text
+    codes = [
+        shared_client.post("/v1/style-code", data={"style_name": name}).json()["code"]
+        for name in (style, f"bandai:{asked.capitalize()}")
+    ]
+    assert codes[0] == codes[1]
+    content = {"content": ("walk.bvh", walk, "text/plain")}
+    fast = [
+        shared_client.post("/v1/stylize", files=content, data={"style_name": name})
+        for name in ("proud", "Proud")
+    ]
+    assert fast[0].status_code == fast[1].status_code == 200 and fast[0].text == fast[1].text
+
+
+@needs_model
 def test_bandai_content_with_a_bandai_style_clip(shared_client):
     content = bandai("dataset-1_walk-right_masculinity_001")
     style = bandai("dataset-1_run_tired_001")
