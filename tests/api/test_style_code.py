@@ -98,3 +98,20 @@ def test_held_out_clips_are_near_their_style(shared_client):
         assert len(body["code"]) == ENTRY["extra"]["style_dim"]
         hits += take.split("_")[2] in [n["style"] for n in body["nearest"][:3]]
     assert hits >= 0.6 * len(takes), f"{hits} of {len(takes)} held-out clips near their style"
+
+
+@needs_model
+def test_a_style_clip_under_half_a_second_is_coded_with_a_warning(shared_client, walk):
+    """A clip of a few frames codes (one pose holds some style), and the answer says that
+    such clips carry less of it; two seconds of walk do not get the warning."""
+    from motion import bvh
+    from service.engines.translator import SHORT_STYLE_SECONDS
+
+    whole = bvh.loads(walk)
+    short = bvh.dumps(whole.slice(0, 5))
+    for clip, warned in ((walk, False), (short, True)):
+        r = shared_client.post("/v1/style-code", files={"style": ("w.bvh", clip, "text/plain")})
+        assert r.status_code == 200, r.text
+        said = [w for w in r.json()["warnings"] if f"under {SHORT_STYLE_SECONDS:g} s" in w]
+        assert bool(said) == warned, r.json()["warnings"]
+    assert "lasts 0.17 s" in said[0]  # 5 frames at 30 fps
