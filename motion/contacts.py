@@ -69,6 +69,14 @@ def ground_heights(
     return np.minimum(levels, levels.min() + MAX_GROUND_ELEVATION * scale)
 
 
+def local_ground(heights: np.ndarray, fps: float, seconds: float) -> np.ndarray:
+    """``(F,)``: the lowest of the feet's ``heights (F, n)`` over a sliding window of about
+    ``seconds`` (an odd number of frames), for a floor that drifts within a clip, where
+    :func:`ground_heights` finds one level for the whole clip."""
+    window = max(1, int(round(seconds * fps)) | 1)
+    return ndimage.minimum_filter1d(np.asarray(heights).min(axis=1), window, mode="nearest")
+
+
 def horizontal_speed(positions: np.ndarray, fps: float) -> np.ndarray:
     """Speed on the floor (X, Z) per second, central differences: ``(F, ...)`` from ``(F, ..., 3)``."""
     positions = np.asarray(positions, dtype=np.float64)

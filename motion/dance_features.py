@@ -158,14 +158,11 @@ def dance_contacts(gpos: np.ndarray, fps: float = FPS) -> np.ndarray:
     ``CONTACT_HEIGHT`` of the local ground, the lowest foot joint's height over a sliding
     ``GROUND_WINDOW_SECONDS`` (the Dance with Melody floor drifts by several cm within a
     dance, so ``contacts.foot_contacts``'s clip-wide ground level misses most contacts)."""
-    from scipy.ndimage import minimum_filter1d
-
     gpos = np.asarray(gpos, dtype=np.float64)
     feet = gpos[:, FOOT_JOINTS]
     if len(gpos) == 0:
         return np.zeros((0, len(FOOT_JOINTS)), dtype=bool)
-    window = max(1, int(round(GROUND_WINDOW_SECONDS * fps)) | 1)
-    ground = minimum_filter1d(feet[..., 1].min(axis=1), window, mode="nearest")
+    ground = CT.local_ground(feet[..., 1], fps, GROUND_WINDOW_SECONDS)
     low = feet[..., 1] - ground[:, None] < CONTACT_HEIGHT * LEG
     slow = CT.horizontal_speed(feet, fps) < CONTACT_SPEED * LEG
     min_frames = max(1, int(round(CT.MIN_CONTACT_SECONDS * fps)))
@@ -180,11 +177,10 @@ def level_floor(motion: Motion) -> Motion:
     height over a sliding ``GROUND_WINDOW_SECONDS``, smoothed, taken off the hips. The Dance
     with Melody takes' floors lie up to 13 cm apart and drift within a take; measured on
     one clip-wide ground level, a foot on a raised stretch of floor counts as in the air."""
-    from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+    from scipy.ndimage import gaussian_filter1d
 
-    feet = K.global_positions(motion)[:, FOOT_JOINTS, 1].min(axis=1)
-    window = max(1, int(round(GROUND_WINDOW_SECONDS * motion.fps)) | 1)
-    floor = minimum_filter1d(feet, window, mode="nearest")
+    feet = K.global_positions(motion)[:, FOOT_JOINTS, 1]
+    floor = CT.local_ground(feet, motion.fps, GROUND_WINDOW_SECONDS)
     floor = gaussian_filter1d(floor, FLOOR_SMOOTH_SECONDS * motion.fps, mode="nearest")
     lpos = motion.lpos.copy()
     lpos[:, HIPS, 1] -= floor

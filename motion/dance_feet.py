@@ -14,7 +14,7 @@ foot in the air clear of the floor. The figures that chose it: docs/dance_alignm
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d
 
 from motion import canonical as C
 from motion import contacts as CT
@@ -97,8 +97,7 @@ def predict_contacts(gpos: np.ndarray, fps: float, network: np.ndarray | None = 
     speed = _speeds(gpos, fps)
     support = support_foot(speed, fps)
     heights = gpos[:, FEET, 1]
-    window = max(1, int(round(GROUND_WINDOW_SECONDS * fps)) | 1)
-    ground = minimum_filter1d(heights.min(axis=1), window, mode="nearest")
+    ground = CT.local_ground(heights, fps, GROUND_WINDOW_SECONDS)
     low = np.minimum(heights[:, 0::2], heights[:, 1::2]) - ground[:, None] < STILL_HEIGHT * LEG
     still = (speed < STILL_SPEED * LEG) & low
     shortest = max(1, int(round(MIN_STANCE_SECONDS * fps)))
