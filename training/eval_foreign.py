@@ -144,12 +144,14 @@ class ByStyleClip:
     /v1/transfer`` runs a style clip. The encoder trained on these takes (but one in ten of
     dataset 2's): a user's own clip of a style may carry it less; with ``unseen`` only
     those held-out ones are drawn, and only the styles that have any are sent
-    (:meth:`sendable`)."""
+    (:meth:`sendable`). ``frames``: each take cut to its middle ``frames`` first (0: whole;
+    ``training.short_style_clips``)."""
 
-    def __init__(self, clips: list, unseen: bool = False) -> None:
+    def __init__(self, clips: list, unseen: bool = False, frames: int = 0) -> None:
         from training.bandai_library import held_out_clip
         from training.data import clip_motion
 
+        self.frames = frames
         self.takes: dict[str, list] = {}
         for c in clips:
             if held_out_clip(c) or not unseen:
@@ -168,7 +170,11 @@ class ByStyleClip:
         )
 
     def code_of(self, engine, take):
-        return engine.predict(StyleCodeJob(self.motion(take)), StageTimer(engine.name))
+        motion = self.motion(take)
+        if self.frames and motion.num_frames > self.frames:
+            start = (motion.num_frames - self.frames) // 2
+            motion = motion.slice(start, start + self.frames)
+        return engine.predict(StyleCodeJob(motion), StageTimer(engine.name))
 
     def __call__(self, engine, item: Item, style: str) -> Motion:
         take = self.take_for(item, style)
@@ -378,9 +384,11 @@ def evaluate(
     pin: bool = False,
     library: Path | None = None,
     models_dir: Path | None = None,
+    style_clip_frames: int = 0,
 ) -> dict[str, dict]:
     """The report of each of ``halves`` (see the module docstring); ``limit``: only the first
-    N items of each half (a smoke run). The judge is the ``pinned`` file where it exists,
+    N items of each half (a smoke run); ``style_clip_frames``: the style clips' length
+    (:class:`ByStyleClip`'s ``frames``). The judge is the ``pinned`` file where it exists,
     else trained (and kept in ``classifier_cache``); ``pin`` writes it to
     :data:`PINNED_JUDGE`. With ``library``: the models in ``models_dir`` judged against
     that library's real takes (:func:`training.foreign_judge.train_library_judge`)."""
@@ -424,9 +432,9 @@ def evaluate(
     items = {h: v[:limit] if limit else v for h, v in load_items(halves).items()}
     seconds["references and items"] = round(time.time() - t, 1)
     adapters = {
-        "translator-clip": ByStyleClip(clips),
+        "translator-clip": ByStyleClip(clips, frames=style_clip_frames),
         "translator-video": ByStyleVideo(clips),
-        "translator-clip-unseen": ByStyleClip(clips, unseen=True),
+        "translator-clip-unseen": ByStyleClip(clips, unseen=True, frames=style_clip_frames),
         "translator-video-unseen": ByStyleVideo(clips, unseen=True),
     }
     outputs: dict[str, list[Output]] = {}

@@ -16,8 +16,6 @@ import argparse
 import json
 from pathlib import Path
 
-from service.engines.translator import StyleCodeJob
-from service.metrics import StageTimer
 from training.reports import publish
 
 FRAMES = (1, 2, 4, 8, 15, 30, 60, 0)
@@ -34,26 +32,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--limit", type=int, default=None, help="only the first N items (a smoke run)")
     args = p.parse_args(argv)
 
-    whole = EF.ByStyleClip
     rows = []
     for frames in args.frames:
-
-        class Cut(whole):
-            def code_of(self, engine, take, frames=frames):
-                motion = self.motion(take)
-                if frames and motion.num_frames > frames:
-                    start = (motion.num_frames - frames) // 2
-                    motion = motion.slice(start, start + frames)
-                return engine.predict(StyleCodeJob(motion), StageTimer(engine.name))
-
-        EF.ByStyleClip = Cut
-        try:
-            report = EF.evaluate(
-                (args.half,), ("translator-clip-unseen",), limit=args.limit,
-                pinned=EF.PINNED_JUDGE, log=lambda *_: None,
-            )[args.half]  # fmt: skip
-        finally:
-            EF.ByStyleClip = whole
+        report = EF.evaluate(
+            (args.half,), ("translator-clip-unseen",), limit=args.limit,
+            pinned=EF.PINNED_JUDGE, log=lambda *_: None, style_clip_frames=frames,
+        )[args.half]  # fmt: skip
         family = report["families"]["translator-clip-unseen"]
         rows.append({"frames": frames, "top1": family["top1"],
                      "intervals_90": family["intervals_90"].get("top1"),

@@ -365,10 +365,9 @@ def test_intervals_resample_takes_not_outputs():
     assert 0.5 <= everything_right["most_predicted_share"][0] <= 1.0
 
 
-def test_short_style_clips_cuts_each_take_and_puts_the_eval_back(tmp_path, monkeypatch):
+def test_short_style_clips_codes_each_take_cut_then_whole(tmp_path, monkeypatch):
     """``training.short_style_clips`` on two items of the dev half: the encoder codes a
-    1-frame cut of each style take, then the whole takes for ``0``, and ``eval_foreign``'s
-    adapter is its own again afterwards."""
+    1-frame cut of each style take, then the whole takes for ``0``."""
     import json
 
     from tests.conftest import data_path
@@ -377,17 +376,15 @@ def test_short_style_clips_cuts_each_take_and_puts_the_eval_back(tmp_path, monke
     data_path("bandai")
     data_path("cmu-31")
     coded: list[int] = []
-    style_code_job = SSC.StyleCodeJob
+    style_code_job = EF.StyleCodeJob
 
     def job(motion):  # the frames each style code is computed from
         coded.append(motion.num_frames)
         return style_code_job(motion)
 
-    monkeypatch.setattr(SSC, "StyleCodeJob", job)
-    whole = EF.ByStyleClip
+    monkeypatch.setattr(EF, "StyleCodeJob", job)
     out = tmp_path / "short.json"
     SSC.main([str(out), "--limit", "2", "--frames", "1", "0"])
-    assert EF.ByStyleClip is whole
     report = json.loads(out.read_text())
     assert [r["frames"] for r in report["rows"]] == [1, 0]
     assert all(0.0 <= r["top1"] <= 1.0 and r["outputs"] > 0 for r in report["rows"])
