@@ -3,7 +3,9 @@ object with ``?format=json``, with the headers every inference answer carries.""
 
 from __future__ import annotations
 
+import json
 import re
+from collections.abc import Sequence
 from pathlib import PurePath
 from typing import Any
 
@@ -16,6 +18,7 @@ from service.problems import problem_responses
 BVH_MEDIA_TYPE = "text/plain; charset=utf-8"
 GLB_MEDIA_TYPE = "model/gltf-binary"
 FBX_MEDIA_TYPE = "application/octet-stream"  # FBX has no registered media type
+WARNINGS_HEADER_CHARS = 4096  # under the 8 KB header blocks that proxies and clients accept
 
 
 def clip_responses(description: str) -> dict:
@@ -56,6 +59,22 @@ def timing_headers(result: Any) -> dict[str, str]:
     }
 
 
+def warning_headers(warnings: Sequence[str]) -> dict[str, str]:
+    """``X-Warnings``, the warnings as a JSON array of strings in ASCII, so that a BVH, GLB or
+    FBX answer carries them too; none without warnings. Those that do not fit in
+    ``WARNINGS_HEADER_CHARS`` are counted in a last string instead (``?format=json`` has them
+    all)."""
+    if not warnings:
+        return {}
+    kept = list(warnings)
+    value = json.dumps(kept)
+    while len(value) > WARNINGS_HEADER_CHARS:
+        kept.pop()
+        left = len(warnings) - len(kept)
+        value = json.dumps([*kept, f"{left} more warning{'s' * (left > 1)}: ?format=json"])
+    return {"X-Warnings": value}
+
+
 def timings_ms(result: Any) -> dict[str, float]:
     return {k: round(v, 2) for k, v in (result.timer.ms if result.timer else {}).items()}
 
@@ -63,7 +82,8 @@ def timings_ms(result: Any) -> dict[str, float]:
 def respond(result: Result, *, upload_name: str | None = None) -> Response:
     """The answer in ``result.format``: BVH as a ``text/plain`` attachment, GLB as a
     ``model/gltf-binary`` one or FBX as an ``application/octet-stream`` one, with ``X-Model-Version``, ``X-Frames``, ``X-Fps`` and
-    ``Server-Timing`` (``X-Request-Id`` is the middleware's); or for ``json`` the object
+    ``Server-Timing`` (``X-Request-Id`` is the middleware's), and ``X-Warnings`` where there
+    are warnings; or for ``json`` the object
     ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings", "source_format"}`` (and
     ``rig``, and ``loop``: whether the clip was taken as a loop; same headers). A clip's
     answer says ``X-Loop`` too."""
@@ -72,6 +92,7 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
         **timing_headers(result),
         "X-Frames": str(result.frames),
         "X-Fps": f"{result.fps:g}",
+        **warning_headers(result.warnings),
     }
     loop = getattr(result, "loop", None)
     if loop is not None:

@@ -129,7 +129,10 @@ async def register_style(
         "timings_ms": answers.timings_ms(done),
     }
     body.pop("sources")
-    headers = {"Server-Timing": done.timer.server_timing()}
+    headers = {
+        "Server-Timing": done.timer.server_timing(),
+        **answers.warning_headers(done.warnings),
+    }
     return JSONResponse(body, status_code=201, headers=headers)
 
 

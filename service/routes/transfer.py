@@ -165,4 +165,5 @@ async def style_code_of(
         "timings_ms": answers.timings_ms(result),
         "warnings": code.warnings,
     }
-    return JSONResponse(body, headers=answers.timing_headers(result))
+    headers = {**answers.timing_headers(result), **answers.warning_headers(code.warnings)}
+    return JSONResponse(body, headers=headers)

@@ -115,3 +115,27 @@ def test_a_style_clip_under_half_a_second_is_coded_with_a_warning(shared_client,
         said = [w for w in r.json()["warnings"] if f"under {SHORT_STYLE_SECONDS:g} s" in w]
         assert bool(said) == warned, r.json()["warnings"]
     assert "lasts 0.17 s" in said[0]  # 5 frames at 30 fps
+
+
+@needs_model
+def test_a_file_answer_carries_its_warnings_in_a_header(shared_client, walk):
+    """A BVH answer has no body to hold warnings, so ``X-Warnings`` carries them as a JSON
+    array: the short style clip's warning reaches a transfer answered as BVH, the same
+    list as the JSON answer's, and the style code's header repeats its body's."""
+    import json
+
+    from motion import bvh
+
+    short = bvh.dumps(bvh.loads(walk).slice(0, 5))
+    files = {"content": ("c.bvh", walk, "text/plain"), "style": ("s.bvh", short, "text/plain")}
+    as_file = shared_client.post("/v1/transfer", files=files)
+    assert as_file.status_code == 200, as_file.text
+    assert as_file.headers["content-type"].startswith("text/plain")
+    in_header = json.loads(as_file.headers["x-warnings"])
+    assert any("lasts 0.17 s" in w for w in in_header), in_header
+    as_json = shared_client.post("/v1/transfer?format=json", files=files)
+    assert json.loads(as_json.headers["x-warnings"]) == as_json.json()["warnings"] == in_header
+    code = shared_client.post("/v1/style-code", files={"style": ("s.bvh", short, "text/plain")})
+    assert json.loads(code.headers["x-warnings"]) == code.json()["warnings"]
+    clean = shared_client.post("/v1/style-code", files={"style": ("w.bvh", walk, "text/plain")})
+    assert clean.json()["warnings"] == [] and "x-warnings" not in clean.headers
