@@ -14,7 +14,8 @@ DIR with the input's name (and its path below the folder), the extension of what
 back. Requests go out ``--jobs`` at a time. A 503 (or 429) is retried after the
 Retry-After the service sends, at most ``--retries`` times and ``--max-wait`` seconds
 each. A file that fails is named at the end, with the service's reason, and the others
-go on; the exit status is 1 if any failed, 2 for bad arguments.
+go on; the exit status is 1 if any failed, 2 for bad arguments. What the service warned
+of a file written (its ``X-Warnings``) is printed at the end too, as ``warned: FILE: ...``.
 
 Where the service needs an API key, give it with ``--api-key`` or ``MOTION_API_KEY`` (the
 variable keeps it out of the process list and shell history); it goes out as
@@ -84,6 +85,7 @@ class Outcome:
     written: Path | None = None
     error: str | None = None
     retries: int = 0
+    warnings: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -147,6 +149,18 @@ def retry_delay(response: httpx.Response, default: float = 1.0) -> float:
     return max(0.0, when.timestamp() - time.time())
 
 
+def answer_warnings(response: httpx.Response) -> list[str]:
+    """The service's warnings of an answer (``X-Warnings``, a JSON array of strings)."""
+    value = response.headers.get("x-warnings")
+    if not value:
+        return []
+    try:
+        said = json.loads(value)
+    except ValueError:
+        return [value]
+    return [str(w) for w in said] if isinstance(said, list) else [value]
+
+
 def describe_failure(response: httpx.Response) -> str:
     """``"400 Invalid BVH: line 3: ..."`` from a problem document, else the status line."""
     text = f"{response.status_code} {response.reason_phrase}"
@@ -200,6 +214,7 @@ async def run_one(
             outcome.error = f"cannot write {target}: {exc.strerror or exc}"
             return outcome
         outcome.written = target
+        outcome.warnings = answer_warnings(response)
         return outcome
 
 
@@ -379,6 +394,9 @@ def main(argv: list[str] | None = None) -> int:
         + (f"; {retries} retries after 503/429" if retries else ""),
         file=sys.stderr,
     )
+    for o in written:
+        for w in o.warnings:
+            print(f"warned: {o.job.source}: {w}", file=sys.stderr)
     for o in failed:
         print(f"failed: {o.job.source}: {o.error}", file=sys.stderr)
     for p in problems:

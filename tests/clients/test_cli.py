@@ -140,6 +140,20 @@ def test_game_options_and_every_kind_of_style(server, tmp_path):
     assert result.returncode == 2 and "not allowed with" in result.stderr
 
 
+def test_the_services_warnings_are_printed_for_each_file(server, tmp_path):
+    """A BVH answer's warnings (``X-Warnings``) reach the user: a style clip of 5 frames is
+    coded with a warning, which the command prints against the file it concerns."""
+    clip = tmp_path / "walk.bvh"
+    bvh.save(load_fixture().slice(0, 60), clip)
+    style_clip = tmp_path / "short.bvh"
+    bvh.save(load_fixture().slice(0, 5), style_clip)
+    result = motion_style("transfer", str(clip), "--style-clip", str(style_clip),
+                          "--url", server.url, "-o", str(tmp_path / "out"), "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    warned = [line for line in result.stderr.splitlines() if line.startswith("warned: ")]
+    assert any(str(clip) in w and "lasts 0.17 s" in w for w in warned), result.stderr
+
+
 class SheddingProxy:
     """Forwards to the service, but answers 503 with Retry-After to the first ``shed``
     requests of every path it has not seen ``shed`` times (``shed=None``: every request)."""
