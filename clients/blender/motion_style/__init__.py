@@ -112,7 +112,7 @@ class MOTION_STYLE_OT_transfer(bpy.types.Operator):
             self.report({"ERROR"}, "Motion Style: no style chosen")
             return {"CANCELLED"}
         try:
-            action = restyle.restyle(
+            action, warnings = restyle.restyle(
                 context,
                 obj,
                 self.server,
@@ -124,6 +124,8 @@ class MOTION_STYLE_OT_transfer(bpy.types.Operator):
         except service.ServiceError as exc:
             self.report({"ERROR"}, f"Motion Style: {exc}")
             return {"CANCELLED"}
+        for warning in warnings:
+            self.report({"WARNING"}, f"Motion Style: {warning}")
         self.report({"INFO"}, f"Motion Style: new action {action.name!r}")
         return {"FINISHED"}
 

@@ -149,7 +149,8 @@ def restyle(
     keep_timing: bool = False,
 ):
     """The new action, named after the original and the style (assigned to ``obj``; the
-    original is kept with a fake user); ``keep_timing``: as many frames as the original."""
+    original is kept with a fake user), and the service's warnings; ``keep_timing``: as many
+    frames as the original."""
     original = obj.animation_data.action
     start, _ = action_frames(obj)
     frame = context.scene.frame_current
@@ -162,8 +163,8 @@ def restyle(
                 server, f.read(), style_name, strength, api_key, keep_timing=keep_timing
             )
         with open(answer, "wb") as f:
-            f.write(result)
-        frames = frames_in(result)
+            f.write(result.bvh)
+        frames = frames_in(result.bvh)
         scratch = import_bvh(context, answer, start)
     try:
         action = bake(context, scratch, obj, f"{original.name}.{style_name}", start, frames)
@@ -175,7 +176,7 @@ def restyle(
         context.scene.frame_set(frame)
     original.use_fake_user = True  # kept although no object uses it now
     obj.animation_data.action = action
-    return action
+    return action, result.warnings
 
 
 def frames_in(bvh: bytes) -> int:

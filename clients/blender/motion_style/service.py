@@ -7,6 +7,7 @@ import os
 import urllib.error
 import urllib.request
 import uuid
+from typing import NamedTuple
 
 API_KEY_ENV = "MOTION_API_KEY"
 
@@ -23,10 +24,29 @@ def _with_key(request: urllib.request.Request, api_key: str) -> urllib.request.R
     return request
 
 
-def _open(request: urllib.request.Request, timeout: float) -> bytes:
+class Answer(NamedTuple):
+    """A restyled clip and what the service warned of it."""
+
+    bvh: bytes
+    warnings: list[str]
+
+
+def warnings_of(header: str | None) -> list[str]:
+    """The service's ``X-Warnings`` header (a JSON array of strings) as a list."""
+    if not header:
+        return []
+    try:
+        said = json.loads(header)
+    except ValueError:
+        return [header]
+    return [str(w) for w in said] if isinstance(said, list) else [header]
+
+
+def _open(request: urllib.request.Request, timeout: float) -> tuple[bytes, list[str]]:
+    """The answer's body and its warnings."""
     try:
         with urllib.request.urlopen(request, timeout=timeout) as response:
-            return response.read()
+            return response.read(), warnings_of(response.headers.get("X-Warnings"))
     except urllib.error.HTTPError as exc:
         body = exc.read()
         try:
@@ -46,7 +66,7 @@ def styles(server: str, api_key: str = "", timeout: float = 10.0) -> list[str]:
     """Names of the translator's styles (``GET /v1/styles``), shipped and registered, as a
     request names them: ``library:style`` where two models offer one name."""
     request = _with_key(urllib.request.Request(server.rstrip("/") + "/v1/styles"), api_key)
-    body = _open(request, timeout)
+    body, _ = _open(request, timeout)
     try:
         return listing_of(json.loads(body).get("translator", []))
     except (ValueError, KeyError, TypeError, AttributeError):
@@ -73,9 +93,9 @@ def transfer(
     api_key: str = "",
     timeout: float = 300.0,
     keep_timing: bool = False,
-) -> bytes:
-    """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``; with
-    ``keep_timing`` without the style's time warp (as many frames as sent)."""
+) -> Answer:
+    """BVH of ``content`` (BVH bytes) restyled by ``POST /v1/transfer``, and the service's
+    warnings; with ``keep_timing`` without the style's time warp (as many frames as sent)."""
     boundary = uuid.uuid4().hex
     parts = []
     fields = [("style_name", style_name), ("strength", repr(float(strength)))]
@@ -98,4 +118,4 @@ def transfer(
         headers={"Content-Type": f"multipart/form-data; boundary={boundary}"},
         method="POST",
     )
-    return _open(_with_key(request, api_key), timeout)
+    return Answer(*_open(_with_key(request, api_key), timeout))
