@@ -169,12 +169,16 @@ class ByStyleClip:
             key=lambda c: zlib.crc32(f"{item.original}|{c.name}".encode()),
         )
 
-    def code_of(self, engine, take):
+    def cut(self, take) -> Motion:
+        """The take's motion, cut to its middle ``frames`` where that is shorter."""
         motion = self.motion(take)
         if self.frames and motion.num_frames > self.frames:
             start = (motion.num_frames - self.frames) // 2
             motion = motion.slice(start, start + self.frames)
-        return engine.predict(StyleCodeJob(motion), StageTimer(engine.name))
+        return motion
+
+    def code_of(self, engine, take):
+        return engine.predict(StyleCodeJob(self.cut(take)), StageTimer(engine.name))
 
     def __call__(self, engine, item: Item, style: str) -> Motion:
         take = self.take_for(item, style)
@@ -190,12 +194,13 @@ class ByStyleVideo(ByStyleClip):
     the take: one video per take) as the joints OpenPose observes
     (``keypoints_of_positions``), through the service's keypoint path
     (the engine's core on the keypoints, ``played``; no velocity factor, so no time warp). Projected
-    mocap is a video without a tracker's noise: real videos may carry a style less."""
+    mocap is a video without a tracker's noise: real videos may carry a style less. ``frames``
+    as :class:`ByStyleClip`'s, cut before the projection."""
 
     def code_of(self, engine, take):
         seed = zlib.crc32(f"{take.name}|view".encode())
         yaw = np.deg2rad(np.random.default_rng(seed).uniform(-90.0, 90.0))
-        gpos = K.global_positions(self.motion(take))
+        gpos = K.global_positions(self.cut(take))
         kp = Fe.keypoints_of_positions(gpos, yaw)
         return engine.predict(StyleCodeJob(kp), StageTimer(engine.name))
 
@@ -387,8 +392,8 @@ def evaluate(
     style_clip_frames: int = 0,
 ) -> dict[str, dict]:
     """The report of each of ``halves`` (see the module docstring); ``limit``: only the first
-    N items of each half (a smoke run); ``style_clip_frames``: the style clips' length
-    (:class:`ByStyleClip`'s ``frames``). The judge is the ``pinned`` file where it exists,
+    N items of each half (a smoke run); ``style_clip_frames``: the style clips' and videos'
+    length (:class:`ByStyleClip`'s ``frames``). The judge is the ``pinned`` file where it exists,
     else trained (and kept in ``classifier_cache``); ``pin`` writes it to
     :data:`PINNED_JUDGE`. With ``library``: the models in ``models_dir`` judged against
     that library's real takes (:func:`training.foreign_judge.train_library_judge`)."""
@@ -433,9 +438,9 @@ def evaluate(
     seconds["references and items"] = round(time.time() - t, 1)
     adapters = {
         "translator-clip": ByStyleClip(clips, frames=style_clip_frames),
-        "translator-video": ByStyleVideo(clips),
+        "translator-video": ByStyleVideo(clips, frames=style_clip_frames),
         "translator-clip-unseen": ByStyleClip(clips, unseen=True, frames=style_clip_frames),
-        "translator-video-unseen": ByStyleVideo(clips, unseen=True),
+        "translator-video-unseen": ByStyleVideo(clips, unseen=True, frames=style_clip_frames),
     }
     outputs: dict[str, list[Output]] = {}
     jitter: dict[str, dict] = {}

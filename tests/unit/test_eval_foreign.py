@@ -365,9 +365,11 @@ def test_intervals_resample_takes_not_outputs():
     assert 0.5 <= everything_right["most_predicted_share"][0] <= 1.0
 
 
-def test_short_style_clips_codes_each_take_cut_then_whole(tmp_path, monkeypatch):
+@pytest.mark.parametrize("source", ["clip", "video"])
+def test_short_style_clips_codes_each_take_cut_then_whole(tmp_path, monkeypatch, source):
     """``training.short_style_clips`` on two items of the dev half: the encoder codes a
-    1-frame cut of each style take, then the whole takes for ``0``."""
+    1-frame cut of each style take (as a clip, or as a video's keypoints), then the whole
+    takes for ``0``."""
     import json
 
     from tests.conftest import data_path
@@ -378,14 +380,15 @@ def test_short_style_clips_codes_each_take_cut_then_whole(tmp_path, monkeypatch)
     coded: list[int] = []
     style_code_job = EF.StyleCodeJob
 
-    def job(motion):  # the frames each style code is computed from
-        coded.append(motion.num_frames)
-        return style_code_job(motion)
+    def job(style):  # the frames each style code is computed from
+        coded.append(len(style.positions) if source == "video" else style.num_frames)
+        return style_code_job(style)
 
     monkeypatch.setattr(EF, "StyleCodeJob", job)
     out = tmp_path / "short.json"
-    SSC.main([str(out), "--limit", "2", "--frames", "1", "0"])
+    SSC.main([str(out), "--limit", "2", "--source", source, "--frames", "1", "0"])
     report = json.loads(out.read_text())
+    assert report["source"] == source
     assert [r["frames"] for r in report["rows"]] == [1, 0]
     assert all(0.0 <= r["top1"] <= 1.0 and r["outputs"] > 0 for r in report["rows"])
     assert report["rows"][0]["outputs"] == report["rows"][1]["outputs"]
