@@ -260,6 +260,7 @@ class Result:
     binary: bytes | None = None
     source_format: str = "bvh"
     loop: bool | None = None  # whether the clip was taken as a loop (None: no clip to say)
+    dance: dict | None = None  # a dance's genre, tempo and beat alignment (None: not a dance)
 
 
 def write_result(

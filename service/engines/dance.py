@@ -263,22 +263,25 @@ class DanceEngine(Engine):
             clip = replace(clip, root_motion=job.root_motion)
         elif job.root_motion == "in_place":
             canon = in_place(canon, C.INDEX["Hips"])
-        warnings = list(result.warnings)
-        warnings.append(
-            f"beat alignment {result.bas:.2f} (chance {result.bas_chance:.2f}) at "
-            f"{result.tempo:.0f} bpm"
-        )
-        return write_result(  # on the rig's own skeleton, if any, at the requested rate
+        answer = write_result(  # on the rig's own skeleton, if any, at the requested rate
             clip,
             canon,
             self.settings,
             timer,
-            warnings=warnings,
+            warnings=result.warnings,
             suffix=f"dance_{job.genre or 'auto'}",
             fps=job.fps,
             like_clip=False,
             fmt=job.format,
         )
+        answer.dance = {
+            "genre": result.genre,
+            "genre_given": result.genre_given,
+            "tempo_bpm": round(float(result.tempo), 1),
+            "beat_alignment": round(float(result.bas), 3),
+            "beat_alignment_chance": round(float(result.bas_chance), 3),
+        }
+        return answer
 
     def _dance(
         self, job: DanceJob, music: Music, out: DanceNetworks, timer: StageTimer

@@ -75,6 +75,17 @@ def warning_headers(warnings: Sequence[str]) -> dict[str, str]:
     return {"X-Warnings": value}
 
 
+def dance_headers(dance: dict) -> dict[str, str]:
+    """What a dance answer says of the dance: the genre danced, the tempo its steps follow
+    and its beat alignment, with the alignment of shifted beats (chance)."""
+    return {
+        "X-Dance-Genre": dance["genre"],
+        "X-Dance-Tempo": f"{dance['tempo_bpm']:g}",
+        "X-Beat-Alignment": f"{dance['beat_alignment']:g}",
+        "X-Beat-Alignment-Chance": f"{dance['beat_alignment_chance']:g}",
+    }
+
+
 def timings_ms(result: Any) -> dict[str, float]:
     return {k: round(v, 2) for k, v in (result.timer.ms if result.timer else {}).items()}
 
@@ -86,7 +97,9 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
     are warnings; or for ``json`` the object
     ``{"bvh", "frames", "fps", "model", "timings_ms", "warnings", "source_format"}`` (and
     ``rig``, and ``loop``: whether the clip was taken as a loop; same headers). A clip's
-    answer says ``X-Loop`` too."""
+    answer says ``X-Loop`` too; a dance's says its genre, tempo and beat alignment
+    (``dance`` in JSON, ``X-Dance-Genre``, ``X-Dance-Tempo``, ``X-Beat-Alignment`` and
+    ``X-Beat-Alignment-Chance``)."""
     name, version = result.model
     headers = {
         **timing_headers(result),
@@ -97,6 +110,9 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
     loop = getattr(result, "loop", None)
     if loop is not None:
         headers["X-Loop"] = "true" if loop else "false"
+    dance = getattr(result, "dance", None)
+    if dance is not None:
+        headers.update(dance_headers(dance))
     if result.format == "json":
         body = {
             "bvh": result.bvh,
@@ -111,6 +127,8 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
             body["rig"] = result.rig
         if loop is not None:
             body["loop"] = loop
+        if dance is not None:
+            body["dance"] = dance
         return JSONResponse(body, headers=headers)
     if result.format in FILE_FORMATS:
         filename = _filename(upload_name, result.suffix, result.format)

@@ -14,6 +14,7 @@ import soundfile
 
 from motion import bvh
 from motion import canonical as C
+from motion import dance_features as DF
 from service.config import Settings
 from tests.api.helpers import assert_problem
 from tests.rigs import FIXTURE
@@ -115,6 +116,26 @@ def test_fps_json_and_predicted_genre(client):
     assert any("predicted" in w for w in body["warnings"])
     assert bvh.loads(body["bvh"]).num_frames == body["frames"]
     assert {"features", "network", "step", "motion"} <= set(body["timings_ms"])
+
+
+def test_the_answer_says_the_genre_tempo_and_beat_alignment(client):
+    """A dance says what it danced to, in headers on a BVH and in ``dance`` in JSON; a
+    beat alignment is not a warning, so a dance with its genre given and a clear beat has
+    none, and one whose genre was predicted says so in ``X-Warnings``."""
+    song = click_wav(8.0, bpm=120.0)
+    r = post(client, song, genre="cha-cha")
+    assert r.status_code == 200, r.text
+    assert r.headers["x-dance-genre"] == "cha-cha"
+    assert abs(float(r.headers["x-dance-tempo"]) - 120.0) < 3.0
+    score, chance = (float(r.headers[h]) for h in ("x-beat-alignment", "x-beat-alignment-chance"))
+    assert 0.0 <= chance < score <= 1.0
+    assert "x-warnings" not in r.headers
+    body = post(client, song, query="?format=json").json()
+    assert body["dance"]["genre_given"] is False and body["dance"]["genre"] in DF.GENRES
+    assert body["dance"]["tempo_bpm"] > 0
+    assert json.loads(post(client, song).headers["x-warnings"]) == body["warnings"]
+    assert any("predicted" in w for w in body["warnings"])
+    assert not any("alignment" in w for w in body["warnings"])
 
 
 def test_seed_gives_variation_and_is_reproducible(client):
