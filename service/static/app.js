@@ -536,6 +536,18 @@ function buildRequest() {
   return { url: '/v1/transfer', form };
 }
 
+// The service's warnings of an answer: X-Warnings, a JSON array of strings.
+function warningsOf(response) {
+  const header = response.headers.get('x-warnings');
+  if (!header) return [];
+  try {
+    const said = JSON.parse(header);
+    return Array.isArray(said) ? said.map(String) : [header];
+  } catch {
+    return [header];
+  }
+}
+
 function filenameOf(response, fallback) {
   const disposition = response.headers.get('content-disposition') || '';
   const match = /filename\*?=(?:UTF-8'')?"?([^";]+)"?/i.exec(disposition);
@@ -586,8 +598,12 @@ async function run(event) {
     link.textContent = `Download ${name.split('.').pop().toUpperCase()}`;
     link.hidden = false;
     const timing = response.headers.get('server-timing');
-    say(`Done: ${response.headers.get('x-frames') || resultView.state.frames} frames`
-      + (timing ? ` (${timing})` : ''));
+    const genre = response.headers.get('x-dance-genre');
+    const danced = genre ? `, ${genre} at ${response.headers.get('x-dance-tempo')} bpm` : '';
+    const warnings = warningsOf(response);
+    say(`Done: ${response.headers.get('x-frames') || resultView.state.frames} frames${danced}`
+      + (timing ? ` (${timing})` : '') + warnings.map((w) => `\nWarning: ${w}`).join(''),
+    warnings.length ? 'warning' : 'info');
   } catch (error) {
     say(`${request.url} failed: ${error.message}`, 'error');
   } finally {

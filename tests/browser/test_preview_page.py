@@ -293,6 +293,30 @@ def test_a_glb_character_goes_in_and_comes_back_as_glb(server, browser, tmp_path
     assert console_errors(browser) == []
 
 
+def test_the_services_warnings_are_shown_with_the_result(server, browser, tmp_path):
+    """A style clip of 5 frames: the result plays, and the message under the controls
+    gives the service's warning (``X-Warnings``) that such a clip carries less style."""
+    from selenium.webdriver.common.by import By
+
+    short = tmp_path / "short_style.bvh"
+    bvh.save(bvh.load(FIXTURE).slice(0, 5), short)
+    open_page(server, browser)
+    browser.find_element(By.ID, "content-file").send_keys(str(FIXTURE))
+    wait_for(browser, "window.motionPreview.input.loaded")
+    browser.find_element(By.ID, "style-file").send_keys(str(short))
+    assert (
+        browser.execute_script(
+            "return document.querySelector('input[name=\"mode\"]:checked').value"
+        )
+        == "clip"
+    )
+    assert run_and_wait(browser)["frames"] >= 2
+    message = browser.find_element(By.ID, "message")
+    assert message.get_attribute("class") == "warning"
+    assert "Done:" in message.text and "Warning: the style clip lasts 0.17 s" in message.text
+    assert console_errors(browser) == []
+
+
 def test_a_file_that_is_neither_bvh_nor_gltf_is_reported_not_thrown(server, browser, tmp_path):
     from selenium.webdriver.common.by import By
 
