@@ -15,7 +15,8 @@ back. Requests go out ``--jobs`` at a time. A 503 (or 429) is retried after the
 Retry-After the service sends, at most ``--retries`` times and ``--max-wait`` seconds
 each. A file that fails is named at the end, with the service's reason, and the others
 go on; the exit status is 1 if any failed, 2 for bad arguments. What the service warned
-of a file written (its ``X-Warnings``) is printed at the end too, as ``warned: FILE: ...``.
+of a file written (its ``X-Warnings``) is printed at the end too, as ``warned: FILE: ...``,
+and without ``-q`` what each song was danced to (``danced: SONG: waltz at 86 bpm, ...``).
 
 Where the service needs an API key, give it with ``--api-key`` or ``MOTION_API_KEY`` (the
 variable keeps it out of the process list and shell history); it goes out as
@@ -86,6 +87,7 @@ class Outcome:
     error: str | None = None
     retries: int = 0
     warnings: list[str] = field(default_factory=list)
+    danced: str | None = None  # a dance's genre, tempo and beat alignment, as the service says
 
 
 @dataclass
@@ -161,6 +163,16 @@ def answer_warnings(response: httpx.Response) -> list[str]:
     return [str(w) for w in said] if isinstance(said, list) else [value]
 
 
+def dance_facts(response: httpx.Response) -> str | None:
+    """``"waltz at 86 bpm, beat alignment 0.61 (chance 0.25)"`` from a dance's headers."""
+    genre = response.headers.get("x-dance-genre")
+    if not genre:
+        return None
+    h = response.headers
+    return (f"{genre} at {h.get('x-dance-tempo', '?')} bpm, beat alignment "
+            f"{h.get('x-beat-alignment', '?')} (chance {h.get('x-beat-alignment-chance', '?')})")  # fmt: skip
+
+
 def describe_failure(response: httpx.Response) -> str:
     """``"400 Invalid BVH: line 3: ..."`` from a problem document, else the status line."""
     text = f"{response.status_code} {response.reason_phrase}"
@@ -215,6 +227,7 @@ async def run_one(
             return outcome
         outcome.written = target
         outcome.warnings = answer_warnings(response)
+        outcome.danced = dance_facts(response)
         return outcome
 
 
@@ -395,6 +408,8 @@ def main(argv: list[str] | None = None) -> int:
         file=sys.stderr,
     )
     for o in written:
+        if o.danced and not args.quiet:
+            print(f"danced: {o.job.source}: {o.danced}", file=sys.stderr)
         for w in o.warnings:
             print(f"warned: {o.job.source}: {w}", file=sys.stderr)
     for o in failed:

@@ -92,6 +92,10 @@ def test_stylize_and_dance_write_beside_each_name(server, mixed_rigs, tmp_path):
         dance = bvh.load(tmp_path / "dance" / f"song{k}.bvh")
         assert dance.fps == pytest.approx(24) and dance.num_frames == round(seconds * 24)
         assert dance.skeleton.names == bvh.load(rig).skeleton.names
+    # no genre given: each song says what the service predicted and the tempo it danced to
+    danced = [line for line in result.stderr.splitlines() if line.startswith("danced: ")]
+    assert len(danced) == 2 and all(" bpm, beat alignment " in line for line in danced), danced
+    assert sum("predicted" in line for line in result.stderr.splitlines()) == 2, result.stderr
 
 
 def test_a_dance_in_place_reaches_the_service(server, tmp_path):
