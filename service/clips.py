@@ -222,9 +222,8 @@ def game_clip(
     if count:
         original, full = original.slice(count), full.slice(count)
         warnings.append(
-            f"the first {'frame is a' if count == 1 else f'{count} frames are'} reference "
-            "pose (bind or T-pose, then a jump to the motion): given back unchanged, not "
-            "restyled"
+            f"the first {'frame is a reference pose' if count == 1 else f'{count} frames are reference poses'} "
+            "(bind or T-pose, then a jump to the motion): given back unchanged, not restyled"
         )
     loop = None if game.loop == "false" else loops.detect(full, force=game.loop == "true")
     closing = loop is not None and not loop.closed
