@@ -21,9 +21,32 @@ FBX_MEDIA_TYPE = "application/octet-stream"  # FBX has no registered media type
 WARNINGS_HEADER_CHARS = 4096  # under the 8 KB header blocks that proxies and clients accept
 
 
-def clip_responses(description: str) -> dict:
+def _header(description: str, kind: str = "string") -> dict:
+    return {"description": description, "schema": {"type": kind}}
+
+
+ANSWER_HEADERS = {
+    "X-Model-Version": _header("the model that answered, name/version"),
+    "X-Frames": _header("frames in the answer", "integer"),
+    "X-Fps": _header("the answer's frame rate", "number"),
+    "Server-Timing": _header("each stage's time"),
+    "X-Loop": _header("true or false: whether the clip was taken as a cycle (restyling only)"),
+    "X-Warnings": _header(
+        "the warnings, as a JSON array of strings; absent without any (a last entry counts "
+        "those past 4 KB: ?format=json has them all)"
+    ),
+}
+DANCE_HEADERS = {
+    "X-Dance-Genre": _header("the genre danced: the one given, or the one predicted"),
+    "X-Dance-Tempo": _header("beats a minute the steps follow, at the genre's level", "number"),
+    "X-Beat-Alignment": _header("the dance's beats against the music's", "number"),
+    "X-Beat-Alignment-Chance": _header("the same score against shifted beats", "number"),
+}
+
+
+def clip_responses(description: str, dance: bool = False) -> dict:
     """OpenAPI ``responses`` of a route that answers BVH, GLB or FBX (or JSON with
-    ``?format=json``)."""
+    ``?format=json``), with the headers the answer carries (a dance's too)."""
     return {
         200: {
             "content": {
@@ -33,6 +56,7 @@ def clip_responses(description: str) -> dict:
                 "application/json": {},
             },
             "description": description,
+            "headers": {**ANSWER_HEADERS, **(DANCE_HEADERS if dance else {})},
         },
         **problem_responses(400, 404, 413, 415, 422, 503, 504),
     }

@@ -46,7 +46,8 @@ def check_genre(genre: str | None) -> str | None:
     summary="Generate a dance for a whole song (BVH as long as the decoded audio)",
     response_class=Response,
     responses=answers.clip_responses(
-        "BVH on the canonical skeleton, or on `skeleton` when given (in its format)"
+        "BVH on the canonical skeleton, or on `skeleton` when given (in its format)",
+        dance=True,
     ),
 )
 async def create_dance(

@@ -155,3 +155,13 @@ def test_openapi_documents_problems_not_fastapi_422(make_client):
         "application/problem+json"
         in schema["paths"]["/readyz"]["get"]["responses"]["503"]["content"]
     )
+
+
+def test_openapi_documents_the_answer_headers(make_client):
+    """A tools programmer reading /docs learns the headers a file answer carries: the
+    warnings on every clip route, a dance's genre and tempo on the dance route only."""
+    schema = make_client().get("/openapi.json").json()
+    for path in ("/v1/transfer", "/v1/stylize", "/v1/dance"):
+        headers = schema["paths"][path]["post"]["responses"]["200"]["headers"]
+        assert {"X-Warnings", "X-Frames", "X-Model-Version"} <= set(headers), path
+        assert ("X-Dance-Genre" in headers) == (path == "/v1/dance"), path
