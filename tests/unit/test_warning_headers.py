@@ -12,9 +12,13 @@ def test_no_warnings_no_header():
 
 
 def test_warnings_round_trip_as_ascii_json():
-    said = ["the style clip lasts 0.17 s — under 0.5 s", 'a "quoted" name, with a comma']
+    said = [
+        "the style clip lasts 0.17 s — under 0.5 s",
+        'a "quoted" name, with a comma',
+        "clip 2 (walk\r\nX-Injected: 1.bvh): a file name with a line break",
+    ]
     value = warning_headers(said)["X-Warnings"]
-    assert value.isascii()
+    assert value.isascii() and "\r" not in value and "\n" not in value
     value.encode("latin-1")  # an HTTP header value
     assert json.loads(value) == said
 
