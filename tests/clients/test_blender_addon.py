@@ -39,6 +39,21 @@ def server(tmp_path_factory):
         yield running, key
 
 
+def run_driver(package, clip, url: str, key: str, key_source: str, out) -> str:
+    """The driver in headless Blender, restyling ``clip`` "elderly"; Blender's output."""
+    env = {k: v for k, v in os.environ.items() if k != "MOTION_API_KEY"}
+    env["BLENDER_USER_SCRIPTS"] = str(out / "blender-user")
+    env["MOTION_STYLE_TEST_KEY" if key_source == "preferences" else "MOTION_API_KEY"] = key
+    result = subprocess.run(
+        [BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
+         str(DRIVER), "--", str(package), str(clip), url, "elderly", "1.0", str(out),
+         key_source],
+        capture_output=True, text=True, timeout=180, env=env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    return result.stdout
+
+
 @pytest.mark.parametrize(("source", "key_source"), [("bvh", "preferences"), ("glb", "environment")])
 def test_addon_restyles_an_action_in_headless_blender(server, source, key_source, tmp_path):
     """``bvh``: an armature Blender's BVH importer built; ``glb``: one its glTF importer
@@ -50,16 +65,7 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, key_source
     if source == "glb":
         blender_run("export", str(clip), str(tmp_path / "walk.glb"))
         clip = tmp_path / "walk.glb"
-    env = {k: v for k, v in os.environ.items() if k != "MOTION_API_KEY"}
-    env["BLENDER_USER_SCRIPTS"] = str(tmp_path / "blender-user")
-    env["MOTION_STYLE_TEST_KEY" if key_source == "preferences" else "MOTION_API_KEY"] = key
-    result = subprocess.run(
-        [BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
-         str(DRIVER), "--", str(package), str(clip), server.url, "elderly", "1.0",
-         str(tmp_path), key_source],
-        capture_output=True, text=True, timeout=180, env=env,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    run_driver(package, clip, server.url, key, key_source, tmp_path)
     # what the service makes of the action Blender exported
     sent = (tmp_path / "before.bvh").read_bytes()
     answer = httpx.post(
@@ -106,3 +112,19 @@ def test_addon_restyles_an_action_in_headless_blender(server, source, key_source
     height = expected.skeleton.height()
     error = np.abs(K.global_positions(performed) - K.global_positions(expected)).max()
     assert error < 1e-4 * height, error
+
+
+def test_the_services_warnings_show_in_blenders_reports(server, tmp_path):
+    """An action whose first frame is the bind pose: the service gives that frame back
+    unrestyled and says so, and the add-on reports it as a warning (``X-Warnings``)."""
+    server, key = server
+    package = addon_zip.build(tmp_path / "motion_style.zip")
+    walk = load_fixture().slice(0, 60)
+    lrot = walk.lrot.copy()
+    lrot[0] = [0.0, 0.0, 0.0, 1.0]  # every joint at its rest rotation
+    clip = tmp_path / "bound.bvh"
+    bvh.save(walk.replace(lrot=lrot), clip)
+    said = run_driver(package, clip, server.url, key, "environment", tmp_path)
+    warned = [line for line in said.splitlines() if line.startswith("Warning: Motion Style: ")]
+    assert any("reference pose" in line for line in warned), said[-3000:]
+    assert json.loads((tmp_path / "report.json").read_text())["transfer"] == ["FINISHED"]
