@@ -133,7 +133,9 @@ async def transfer(
     plane: DataPlaneDep,
     clip: ContentDep,
     style_fields: Annotated[StyleFields, Depends(read_style_fields)],
-    strength: Annotated[float, Form(ge=0, le=1, description="0 keeps the content's style")] = 1.0,
+    strength: Annotated[
+        float, Form(ge=0, le=1, description="0 gives the content back as sent")
+    ] = 1.0,
 ) -> Response:
     job = TransferRequest(clip, style_source(style_fields, settings), strength)
     endpoint = answers.route_template(request)
