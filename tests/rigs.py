@@ -294,6 +294,14 @@ def root_on_floor(motion: Motion, moving: bool = False) -> Motion:
     return rebuild(motion, joints)
 
 
+def bind_pose_first(motion: Motion) -> Motion:
+    """``motion`` with its first frame in the rig's bind pose (every joint at its rest
+    rotation, the root where it was), as a capture that opens on its bind pose."""
+    lrot = motion.lrot.copy()
+    lrot[0] = [0.0, 0.0, 0.0, 1.0]
+    return motion.replace(lrot=lrot)
+
+
 def a_pose_by_mapping(motion: Motion) -> Motion:
     """Rest pose with the upper arms 45 degrees down (world motion unchanged), found by
     the rig's mapping rather than names."""

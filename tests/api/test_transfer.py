@@ -293,10 +293,11 @@ def test_strength_zero_gives_the_clip_back(shared_client, walk):
     assert a.text == b.text
     assert a.text != c.text
     sent = bvh.loads(walk)
-    lrot = sent.lrot.copy()
-    lrot[0] = [0.0, 0.0, 0.0, 1.0]  # the bind pose first
-    bound = sent.replace(lrot=lrot)
-    for clip, loop in ((sent, False), (bound, False), (rigs.walk_cycle(), True)):
+    for clip, loop in (
+        (sent, False),
+        (rigs.bind_pose_first(sent), False),
+        (rigs.walk_cycle(), True),
+    ):
         r = transfer(shared_client, bvh.dumps(clip).encode(), style_name=STYLES[0],
                      strength="0", query="?format=json")  # fmt: skip
         assert r.status_code == 200, r.text

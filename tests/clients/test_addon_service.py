@@ -9,7 +9,7 @@ import importlib.util
 import pytest
 
 from motion import bvh
-from tests.rigs import load_fixture
+from tests.rigs import bind_pose_first, load_fixture
 from tests.server import REPO, ServerProcess
 
 SERVICE = REPO / "clients" / "blender" / "motion_style" / "service.py"
@@ -34,9 +34,7 @@ def test_a_transfer_brings_back_the_services_warnings(addon_service, server):
     """A walk whose first frame is the rig's bind pose: that frame comes back unrestyled,
     and the add-on hears why; the same walk without it comes back with no warning."""
     walk = load_fixture().slice(0, 60)
-    lrot = walk.lrot.copy()
-    lrot[0] = [0.0, 0.0, 0.0, 1.0]  # every joint at its rest rotation
-    bound = walk.replace(lrot=lrot)
+    bound = bind_pose_first(walk)
     answer = addon_service.transfer(server.url, bvh.dumps(bound).encode(), "proud", 1.0)
     assert bvh.loads(answer.bvh.decode()).num_frames > 1
     assert any("reference" in w for w in answer.warnings), answer.warnings

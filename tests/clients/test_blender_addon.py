@@ -21,7 +21,7 @@ from motion import bvh
 from motion import kinematics as K
 from service import api_keys
 from tests.gltf_files import BLENDER, REPO, blender_run
-from tests.rigs import load_fixture
+from tests.rigs import bind_pose_first, load_fixture
 from tests.server import ServerProcess
 
 DRIVER = REPO / "tests" / "blender" / "addon_driver.py"
@@ -119,11 +119,8 @@ def test_the_services_warnings_show_in_blenders_reports(server, tmp_path):
     unrestyled and says so, and the add-on reports it as a warning (``X-Warnings``)."""
     server, key = server
     package = addon_zip.build(tmp_path / "motion_style.zip")
-    walk = load_fixture().slice(0, 60)
-    lrot = walk.lrot.copy()
-    lrot[0] = [0.0, 0.0, 0.0, 1.0]  # every joint at its rest rotation
     clip = tmp_path / "bound.bvh"
-    bvh.save(walk.replace(lrot=lrot), clip)
+    bvh.save(bind_pose_first(load_fixture().slice(0, 60)), clip)
     said = run_driver(package, clip, server.url, key, "environment", tmp_path)
     warned = [line for line in said.splitlines() if line.startswith("Warning: Motion Style: ")]
     assert any("reference pose" in line for line in warned), said[-3000:]
