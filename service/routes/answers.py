@@ -131,10 +131,9 @@ def respond(result: Result, *, upload_name: str | None = None) -> Response:
         "X-Fps": f"{result.fps:g}",
         **warning_headers(result.warnings),
     }
-    loop = getattr(result, "loop", None)
+    loop, dance = result.loop, result.dance
     if loop is not None:
         headers["X-Loop"] = "true" if loop else "false"
-    dance = getattr(result, "dance", None)
     if dance is not None:
         headers.update(dance_headers(dance))
     if result.format == "json":
